@@ -1,0 +1,34 @@
+//! # conic-corners
+//!
+//! Finds checkerboard and checkerboard-like markers in images and localizes every corner to a small
+//! fraction of a pixel, on flat markers and on markers bent around curved objects, following
+//! *Accurate Detection and Localization of Curved Checkerboard-Like Marker Based on Quadratic Form*.
+//!
+//! One module per pipeline stage:
+//!
+//! | stage | module |
+//! |---|---|
+//! | Hessian pre-filter (III-A) | [`prefilter`] |
+//! | template final election (III-B) | [`election`] |
+//! | Delaunay connectivity and grid labels (III-C) | [`connectivity`] |
+//! | sigmoid subpixel edge sampling (III-D) | [`edge_sampling`] |
+//! | sample-chain segmentation (III-E) | [`segmentation`] |
+//! | conic / line fitting and intersection (III-F) | [`quadratic_form`] |
+//!
+//! [`refine`] combines edge sampling and quadratic-form fitting into a single-corner refiner (a more
+//! accurate drop-in for OpenCV's `cornerSubPix`); [`synth`] renders test images with exact truth.
+//!
+//! **Coordinates** everywhere: x to the right, y down, the centre of the top-left pixel is (0, 0)
+//! (OpenCV's convention). Pixel `(i, j)` covers `[i - 0.5, i + 0.5] × [j - 0.5, j + 0.5]`.
+
+pub mod connectivity;
+pub mod edge_sampling;
+pub mod election;
+pub mod image;
+pub mod prefilter;
+pub mod quadratic_form;
+pub mod refine;
+pub mod segmentation;
+pub mod synth;
+
+pub use crate::image::{GrayImage, ImageError};
