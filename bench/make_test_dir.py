@@ -28,7 +28,8 @@ def _phi(t):
     one 8-bit grey level), since numpy has no erf and scipy is not a dependency."""
     z = np.abs(t) / math.sqrt(2.0)
     k = 1.0 / (1.0 + 0.3275911 * z)
-    poly = k * (0.254829592 + k * (-0.284496736 + k * (1.421413741 + k * (-1.453152027 + k * 1.061405429))))
+    poly = k * (0.254829592 + k * (-0.284496736 + k * (1.421413741
+                                                       + k * (-1.453152027 + k * 1.061405429))))
     erf = 1.0 - poly * np.exp(-z * z)
     return 0.5 * (1.0 + np.sign(t) * erf)
 

@@ -33,9 +33,9 @@ Methods:
       norm = True, score_thr = 0.01 on the min-max normalised image, find_corners() (which
       includes its sub-pixel refinement), corner nearest the truth.
   chess-corners-r2, chess-corners-r5
-      chess-corners' ChESS detector (single scale, default threshold 30, no orientation fit) with its
-      saddle-point refiner of radius 2 / 5, detection nearest the truth. The Python API has no
-      way to refine caller-given points, so the detector must find the corner itself.
+      chess-corners' ChESS detector (single scale, default threshold 30, no orientation fit)
+      with its saddle-point refiner of radius 2 / 5, detection nearest the truth. The Python
+      API has no way to refine caller-given points, so the detector must find the corner itself.
 """
 import argparse
 import json
@@ -226,8 +226,7 @@ def run_dir(root, jobs):
             results = pool.map(_process, tasks, chunksize=4)
         try:
             for i, recs in enumerate(results, 1):
-                for r in recs:
-                    out.write(json.dumps(r) + "\n")
+                out.writelines(json.dumps(r) + "\n" for r in recs)
                 if i % 50 == 0 or i == len(tasks):
                     print(f"peers: {i}/{len(tasks)} images, {time.time() - t0:.1f} s",
                           file=sys.stderr)

@@ -20,6 +20,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
 from collections import defaultdict
 
@@ -110,7 +111,8 @@ def summarize(root):
                             errs.append(err)
                 mle = sum(errs) / len(errs) if errs else None
                 stats[m] = (mle, 100.0 * len(errs) / len(entries))
-            peer_mles = [(stats[m][0], m) for m in present if m in peers and stats[m][0] is not None]
+            peer_mles = [(stats[m][0], m) for m in present
+                         if m in peers and stats[m][0] is not None]
             best = min(peer_mles) if peer_mles else None
             ratio = None
             if best and primary and stats[primary][0] is not None and best[0] > 0:
@@ -162,7 +164,10 @@ def table(head, body, markdown):
         lines += ["| " + " | ".join(row) + " |" for row in body]
         return lines
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
-    fmt = lambda row: "  ".join(x.rjust(w) for x, w in zip(row, widths))  # noqa: E731
+
+    def fmt(row):
+        return "  ".join(x.rjust(w) for x, w in zip(row, widths))
+
     return [fmt(head), fmt(["-" * w for w in widths])] + [fmt(row) for row in body]
 
 
@@ -171,6 +176,7 @@ def main():
     ap.add_argument("dir")
     ap.add_argument("--markdown", action="store_true", help="markdown tables for BENCHMARKS.md")
     a = ap.parse_args()
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `report.py DIR | head` ends quietly
     tables, runtime = summarize(a.dir)
     print(render(tables, runtime, a.markdown))
 
