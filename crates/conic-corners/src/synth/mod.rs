@@ -176,7 +176,9 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn image_from(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> GrayImage {
-        let data = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| f(x, y));
+        let data = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| f(x, y));
         GrayImage::from_vec(w, h, data.collect()).unwrap()
     }
 
@@ -235,7 +237,12 @@ mod tests {
         let img = noisy(3);
         let n = img.data().len() as f64;
         let mean = img.data().iter().map(|&v| v as f64).sum::<f64>() / n;
-        let var = img.data().iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n;
+        let var = img
+            .data()
+            .iter()
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / n;
         // 40 000 samples: mean within ~4 standard errors, std within ~1 %.
         assert!((mean - 0.5).abs() < 0.001, "{mean}");
         assert!((var.sqrt() - 0.05).abs() < 0.0008, "{}", var.sqrt());
@@ -260,7 +267,10 @@ mod tests {
         let fyy = 4.0 * b * b * sum_d2 / (sigma * sigma);
         let expected = (1.0 / fxx + 1.0 / fyy).sqrt();
         let got = cramer_rao_bound(&img, [20.2, 19.7], h, sigma).unwrap();
-        assert!((got - expected).abs() < 1e-4 * expected, "{got} vs {expected}");
+        assert!(
+            (got - expected).abs() < 1e-4 * expected,
+            "{got} vs {expected}"
+        );
         // Linear in σ.
         let got2 = cramer_rao_bound(&img, [20.0, 20.0], h, 2.0 * sigma).unwrap();
         assert!((got2 - 2.0 * expected).abs() < 1e-4 * expected);
