@@ -134,7 +134,7 @@ fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
         m[r1][s1] * m[r2][s2] - m[r1][s2] * m[r2][s1]
     };
     let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
-    if !(det.abs() > 0.0) || !det.is_finite() {
+    if det == 0.0 || !det.is_finite() {
         return None;
     }
     // Inverse = adjugate / det; the adjugate is the transposed cofactor matrix.

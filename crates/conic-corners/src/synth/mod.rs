@@ -106,12 +106,12 @@ pub fn gaussian_blur(image: &GrayImage, sigma: f64) -> GrayImage {
 /// order (so a seeded generator gives the same noise on every machine). Values are not clamped.
 /// `sigma ≤ 0` or not finite leaves the image unchanged and draws nothing.
 pub fn add_gaussian_noise<R: Rng + ?Sized>(image: &mut GrayImage, sigma: f64, rng: &mut R) {
+    if sigma.is_nan() || sigma <= 0.0 {
+        return;
+    }
     let Ok(normal) = Normal::new(0.0f64, sigma) else {
         return;
     };
-    if !(sigma > 0.0) {
-        return;
-    }
     for v in image.data_mut() {
         *v += normal.sample(rng) as f32;
     }
@@ -136,10 +136,8 @@ pub fn cramer_rao_bound(
     half_window: usize,
     noise_sigma: f64,
 ) -> Option<f64> {
-    if !(noise_sigma > 0.0 && noise_sigma.is_finite())
-        || !center[0].is_finite()
-        || !center[1].is_finite()
-    {
+    let finite = noise_sigma.is_finite() && center[0].is_finite() && center[1].is_finite();
+    if !finite || noise_sigma <= 0.0 {
         return None;
     }
     let (cx, cy) = (center[0].round(), center[1].round());
@@ -163,7 +161,7 @@ pub fn cramer_rao_bound(
     let (fxx, fxy, fyy) = (fxx / s2, fxy / s2, fyy / s2);
     let trace = fxx + fyy;
     let det = fxx * fyy - fxy * fxy;
-    if !(trace > 0.0) || det <= 1e-12 * trace * trace {
+    if trace.is_nan() || trace <= 0.0 || det <= 1e-12 * trace * trace {
         return None;
     }
     Some((trace / det).sqrt())
