@@ -14,8 +14,12 @@
 //! pixels has, across the edge, the profile of a step convolved with a Gaussian and with the
 //! projection of the pixel footprint onto the normal; that projection has variance 1/12 whatever the
 //! edge orientation, so the profile has total spread `σ_t = √(σ² + 1/12)`. The logistic that best fits
-//! such an erf profile (least squares over ±3σ_t) has `c = σ_t / LOGISTIC_TO_GAUSSIAN`, with
-//! [`LOGISTIC_TO_GAUSSIAN`] ≈ 1.70; see [`blur_sigma_from_widths`].
+//! such an erf profile has `c ≈ σ_t / 1.68` ([`LOGISTIC_TO_GAUSSIAN`]); see [`blur_sigma_from_widths`].
+//!
+//! **Accuracy.** The logistic is not the erf profile; the mismatch costs, noise-free, at most 0.005 px
+//! for σ = 1…5 with the edge within half a pixel of the centre of a ±5σ_t window (0.006 px at
+//! σ = 0.7, 0.014 px at σ = 0.5), and grows when the window is off-centre (σ = 2, 25 samples:
+//! 0.008 px at 2 px off, 0.017 px at 4 px off), which is why [`sample_edge`] re-centres.
 
 use crate::GrayImage;
 
@@ -29,8 +33,10 @@ pub const MAX_HALF_WIDTH: usize = (MAX_SAMPLES - 1) / 2;
 /// Ratio σ_t / c between the standard deviation σ_t of a Gaussian-blurred step (erf profile) and
 /// the width `c` of the logistic that fits it best by least squares.
 ///
-/// Measured by fitting densely sampled erf profiles over windows of ±3σ_t … ±6σ_t: the ratio is
-/// 1.70 ± 0.02 (slope matching alone would give √(2π)/4⁻¹ = 1.596, variance matching π/√3 = 1.814).
+/// The least-squares ratio depends on how much of the tails the window holds: fitting dense erf
+/// profiles gave 1.61 over ±3σ_t, 1.65 over ±4σ_t, 1.68 over ±6σ_t; area-sampled pixel profiles
+/// (σ = 0.7…3, windows ≥ ±5σ_t) gave 1.67–1.69. Matching the central slope alone would give
+/// `4/√(2π)` = 1.596, matching the variance `π/√3` = 1.814.
 pub const LOGISTIC_TO_GAUSSIAN: f64 = 1.68;
 
 /// Result of [`fit_sigmoid`], in the profile's coordinates (`s = i` at sample `i`) and intensity units.
@@ -66,7 +72,8 @@ impl SigmoidFit {
 /// Acceptance thresholds and iteration limits of [`fit_sigmoid_with`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SigmoidParams {
-    /// Smallest accepted `|a| / rms`. Pure noise fits reach ~3; a 3 %-noise edge reaches ~30.
+    /// Smallest accepted `|a| / rms`. Fits to 25 samples of pure noise reach 2.8 (99th percentile),
+    /// an edge with noise 3 % of its contrast about 33, with 15 % noise about 6.5.
     pub min_contrast_to_noise: f64,
     /// The position must lie in `[end_margin, n − 1 − end_margin]`: the edge must be bracketed by
     /// samples on both sides, not extrapolated.
@@ -131,7 +138,8 @@ pub fn fit_sigmoid_with(
         hi = hi.max(v as f64);
     }
     let range = hi - lo;
-    if !(range > 0.0) {
+    if range <= 0.0 {
+        // Flat profile (the samples are finite, so no NaN here).
         return None;
     }
     let mut y = [0.0f64; MAX_SAMPLES];
@@ -200,7 +208,7 @@ fn start_values(y: &[f64]) -> Option<[f64; 4]> {
     }
     let sign = a.signum();
     let (imax, gmax) = steepest(sign);
-    if !(gmax > 0.0) {
+    if gmax <= 0.0 {
         return None;
     }
     let mid = first + 0.5 * a;
@@ -229,6 +237,8 @@ struct LmFit {
 
 /// Residual sum of squares, `JᵀJ` and `Jᵀr` of the model at `theta` (`[a, d, p, c]`, the first `K`
 /// of them free; with `K = 3` the width is `fixed_c`). Returns `None` if `c` is not positive or `p` not finite.
+// Index loops mirror the (triangular) matrix algebra more plainly than iterator chains.
+#[allow(clippy::needless_range_loop)]
 #[inline]
 fn normal_equations<const K: usize>(
     y: &[f64],
@@ -286,6 +296,7 @@ fn normal_equations<const K: usize>(
 }
 
 /// Solves `m x = b` for symmetric positive definite `m` by Cholesky; `None` if not positive definite.
+#[allow(clippy::needless_range_loop)]
 #[inline]
 fn cholesky_solve<const K: usize>(m: &[[f64; K]; K], b: &[f64; K]) -> Option<[f64; K]> {
     let mut l = [[0.0; K]; K];
@@ -294,7 +305,7 @@ fn cholesky_solve<const K: usize>(m: &[[f64; K]; K], b: &[f64; K]) -> Option<[f6
         for k in 0..j {
             s -= l[j][k] * l[j][k];
         }
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return None;
         }
         l[j][j] = s.sqrt();
