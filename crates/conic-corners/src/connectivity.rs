@@ -40,6 +40,12 @@
 //! `2·theta_edge` apart (so a cell's diagonal can never fall in a ray's cone); corners violating
 //! this, or with non-finite positions or orientations, get no links.
 //!
+//! Limitations: the two parts of a split board are not re-joined (their relative offset is
+//! unknown). A false corner whose orientations match the grid and which lies within about a
+//! third of a step of a grid site, or mid-way along a grid line next to another such one, can
+//! stand in for the true corner there or add a spurious half-step row: a detector's non-maximum
+//! suppression and saddle test are expected to have removed those.
+//!
 //! # Labelling rule ([`label`])
 //!
 //! Breadth-first walk of each connected component, seeded at the corner with the most links (ties:
