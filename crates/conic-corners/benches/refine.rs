@@ -1,0 +1,30 @@
+//! Speed of the single-corner refiner: `cargo bench -p conic-corners --bench refine`.
+//!
+//! One corner of the paper's noise test (σn 3 %, blur 3 px, κ ≈ 1.2·10⁻³, φ ≈ 10°), refined from
+//! the truth rounded to the nearest pixel, with the default parameters and with shorter walks.
+
+use conic_corners::refine::{refine_one, RefineParams};
+use conic_corners::synth::{scene_for, Protocol};
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use rand::SeedableRng;
+
+fn bench_refine(c: &mut Criterion) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let scene = scene_for(Protocol::Noise, 0.03, &mut rng);
+    let rendered = scene.render(7).expect("valid scene");
+    let start = [rendered.truth[0].round(), rendered.truth[1].round()];
+    let mut group = c.benchmark_group("refine_one");
+    for reach in [100.0, 50.0, 25.0] {
+        let params = RefineParams {
+            reach,
+            ..RefineParams::default()
+        };
+        group.bench_function(format!("reach{reach}"), |b| {
+            b.iter(|| refine_one(black_box(&rendered.image), black_box(start), &params))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_refine);
+criterion_main!(benches);
