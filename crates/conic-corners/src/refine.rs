@@ -21,7 +21,9 @@
 //! pass from that corner gives the result. Coordinates: pixel centres at integers, `(0, 0)` is the
 //! centre of the top-left pixel.
 
-use crate::edge_sampling::{blur_sigma_from_widths, sample_edge, EdgeSample};
+use crate::edge_sampling::{
+    blur_sigma_from_widths, sample_edge_with, Axis, EdgeSample, SigmoidParams, LOGISTIC_TO_GAUSSIAN,
+};
 use crate::election::edge_orientations;
 use crate::quadratic_form::{fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve};
 use crate::GrayImage;
@@ -141,7 +143,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     let mut walks = Walks::default();
     // Pilot: short walks with a generous window measure the blur and a first corner.
     let pilot_sigma = params.blur.unwrap_or(2.0);
-    let pilot = WalkConfig::new(pilot_sigma, params.reach.min(20.0 + 6.0 * pilot_sigma), params.stride);
+    let pilot = WalkConfig::pilot(pilot_sigma, params.reach.min(20.0 + 6.0 * pilot_sigma), params.stride);
     walks.walk_all(image, start, directions, &pilot);
     let sigma = params
         .blur
@@ -154,7 +156,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
         }
         _ => (start, walks.directions().unwrap_or(directions)),
     };
-    let full = WalkConfig::new(sigma, params.reach, params.stride);
+    let full = WalkConfig::measure(sigma, params.reach, params.stride);
     walks.walk_all(image, centre, directions, &full);
     match walks.solve(centre, params, image) {
         Some(sol) if dist(sol.point, start) <= params.max_shift => Refined {
@@ -172,16 +174,75 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
-/// Unit directions of the four rays: `[e₁, e₂, −e₁, −e₂]`, from the quadratic surface fit at the
-/// smallest window that gives a saddle.
+/// Unit directions of the four rays in angular order, so that rays `k` and `k + 2` belong to the
+/// same edge.
+///
+/// The quadratic surface fit (eq. 3–4) gives the two edge orientations, but a step corner is not a
+/// product of two planes: on an oblique corner its angles are off by up to ~20°. Each ray is
+/// therefore re-measured where the edge crosses a ring around `p`: the ring profile (averaged over
+/// a few radii, smoothed along the ring) crosses its mid-level exactly four times on a corner, and
+/// those crossings are the ray directions. When the ring does not show four clean crossings (noise,
+/// clutter, the border) the surface-fit directions are used.
 fn initial_directions(image: &GrayImage, p: [f64; 2]) -> Option<[[f64; 2]; 4]> {
-    [4usize, 7, 11]
+    [10.0, 6.0, 16.0]
         .iter()
-        .find_map(|&h| edge_orientations(image, p[0], p[1], h))
-        .map(|[t1, t2]| {
-            let (e1, e2) = ([t1.cos(), t1.sin()], [t2.cos(), t2.sin()]);
-            [e1, e2, [-e1[0], -e1[1]], [-e2[0], -e2[1]]]
+        .find_map(|&r| ring_directions(image, p, r))
+        .or_else(|| {
+            [4usize, 7, 11]
+                .iter()
+                .find_map(|&h| edge_orientations(image, p[0], p[1], h))
+                .map(|[t1, t2]| {
+                    let (e1, e2) = ([t1.cos(), t1.sin()], [t2.cos(), t2.sin()]);
+                    [e1, e2, [-e1[0], -e1[1]], [-e2[0], -e2[1]]]
+                })
         })
+}
+
+/// Angular resolution of the ring profile.
+const RING_STEPS: usize = 180;
+
+/// The four mid-level crossings of the intensity on a ring of radius `r` around `p`; see
+/// [`initial_directions`].
+fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 4]> {
+    let mut ring = [0f32; RING_STEPS];
+    for (i, v) in ring.iter_mut().enumerate() {
+        let a = i as f64 * std::f64::consts::TAU / RING_STEPS as f64;
+        let (c, s) = (a.cos(), a.sin());
+        let mut acc = 0.0;
+        for dr in [-1.5, -0.5, 0.5, 1.5] {
+            let rr = r + dr;
+            acc += image.bilinear((p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
+        }
+        *v = acc;
+    }
+    // Circular [1 2 3 2 1] smoothing (±4°).
+    let mut smooth = [0f32; RING_STEPS];
+    for (i, v) in smooth.iter_mut().enumerate() {
+        let at = |k: isize| ring[(i as isize + k).rem_euclid(RING_STEPS as isize) as usize];
+        *v = at(-2) + 2.0 * at(-1) + 3.0 * at(0) + 2.0 * at(1) + at(2);
+    }
+    let (lo, hi) = smooth
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    if !(hi > lo) {
+        return None;
+    }
+    let mid = 0.5 * (lo + hi);
+    let mut out = [[0.0; 2]; 4];
+    let mut n = 0;
+    for i in 0..RING_STEPS {
+        let (a, b) = (smooth[i] - mid, smooth[(i + 1) % RING_STEPS] - mid);
+        if (a < 0.0) != (b < 0.0) {
+            if n == 4 {
+                return None;
+            }
+            let f = (a / (a - b)) as f64;
+            let angle = (i as f64 + f) * std::f64::consts::TAU / RING_STEPS as f64;
+            out[n] = [angle.cos(), angle.sin()];
+            n += 1;
+        }
+    }
+    (n == 4).then_some(out)
 }
 
 /// How one pass walks its rays.
@@ -191,15 +252,38 @@ struct WalkConfig {
     start: f64,
     reach: f64,
     stride: usize,
+    /// Logistic width across the edge (px) when the blur is known: the sigmoid fits then keep it
+    /// fixed, which halves their variance under heavy noise at no bias when it is right.
+    normal_width: Option<f64>,
+    sigmoid: SigmoidParams,
 }
 
 impl WalkConfig {
-    fn new(sigma: f64, reach: f64, stride: usize) -> Self {
+    /// A pilot pass: free sigmoid widths, to measure the blur.
+    fn pilot(sigma: f64, reach: f64, stride: usize) -> Self {
         Self {
             sigma,
             start: 2.5 * sigma + 3.0,
             reach,
             stride,
+            normal_width: None,
+            sigmoid: SigmoidParams {
+                min_contrast_to_noise: 3.0,
+                ..SigmoidParams::default()
+            },
+        }
+    }
+
+    /// The measuring pass, with the blur known: fixed sigmoid width, and a lower contrast-to-noise
+    /// floor since each sample must also fall near its predicted position.
+    fn measure(sigma: f64, reach: f64, stride: usize) -> Self {
+        Self {
+            normal_width: Some((sigma * sigma + 1.0 / 12.0).sqrt() / LOGISTIC_TO_GAUSSIAN),
+            sigmoid: SigmoidParams {
+                min_contrast_to_noise: 2.0,
+                ..SigmoidParams::default()
+            },
+            ..Self::pilot(sigma, reach, stride)
         }
     }
 
@@ -332,9 +416,11 @@ fn robust_curve_fit(points: &mut Vec<[f64; 2]>) -> Option<(Curve, f64)> {
 /// Samples are taken on consecutive scanlines (rows for a steep edge, columns for a flat one),
 /// `stride` apart. The next crossing is predicted from the chord over the last ~20 samples, so the
 /// walk follows a bending edge. A scanline whose profile window would reach the other edge is
-/// skipped; the walk ends at the reach, after four failed scanlines in a row, or where the edge
-/// changes polarity or its contrast leaves 0.5–2× that of the first samples (then the samples
-/// within the blurred zone of that event are dropped).
+/// skipped. A scanline is a miss when its fit fails, lands far from the prediction, has the wrong
+/// polarity, or a contrast outside 0.4–2.5× that of the first samples; the walk ends at the reach or
+/// after [`MAX_MISSES`] misses in a row — the image border, the next corner of a board (where the
+/// edge changes polarity), an occluder — and then drops the samples within the blurred zone of
+/// where it ended.
 fn walk_ray(
     image: &GrayImage,
     corner: [f64; 2],
@@ -350,7 +436,8 @@ fn walk_ray(
     let mut misses = 0;
     let mut polarity = 0.0f64;
     let mut contrast_ref = 0.0f64;
-    let mut ended_by_change = false;
+    let mut reached = false;
+    let mut tolerance = 1.0 + 0.5 * cfg.sigma;
     let guard = 2.5 * cfg.sigma + 1.0;
     loop {
         // Scanline geometry follows the current direction.
@@ -365,8 +452,13 @@ fn walk_ray(
             [anchor[0] + dx, anchor[1] + d[1] / d[0] * dx]
         };
         first_scan = false;
+        anchor = q;
         let t = (q[0] - corner[0]) * dir[0] + (q[1] - corner[1]) * dir[1];
-        if t > cfg.reach || !q[0].is_finite() || !q[1].is_finite() {
+        if t > cfg.reach {
+            reached = true;
+            break;
+        }
+        if !q[0].is_finite() || !q[1].is_finite() {
             break;
         }
         // Where the other edge (a straight line through the corner) crosses this scanline.
@@ -380,54 +472,95 @@ fn walk_ray(
             (other[0].abs() > 1e-9)
                 .then(|| (corner[1] + (x0 - corner[0]) * other[1] / other[0] - q[1]).abs())
         };
-        let clear = clash.map_or(true, |c| c > hw as f64 + guard);
-        let sample = if clear { sample_edge(image, q, d, hw, None) } else { None };
-        anchor = q;
-        let Some(s) = sample else {
-            if clear {
-                misses += 1;
-                if misses > 3 {
-                    break;
-                }
-            }
+        if clash.is_some_and(|c| c <= hw as f64 + guard) {
             continue;
-        };
-        let a = s.fit.amplitude;
-        if polarity == 0.0 {
-            polarity = a.signum();
         }
-        if a.signum() != polarity {
-            ended_by_change = true;
-            break;
-        }
-        if out.len() < 5 {
-            contrast_ref = (contrast_ref * out.len() as f64 + a.abs()) / (out.len() + 1) as f64;
-        } else if a.abs() < 0.5 * contrast_ref || a.abs() > 2.0 * contrast_ref {
-            ended_by_change = true;
-            break;
-        }
-        // A sample far off the predicted crossing is an outlier: skip it, keep the prediction.
-        let off = (s.point[0] - q[0]).hypot(s.point[1] - q[1]);
-        if out.len() >= 3 && off > 1.0 + 0.5 * cfg.sigma {
+        let fixed = cfg.normal_width.map(|c| {
+            let along = if steep { d[1] } else { d[0] };
+            (c / along.abs().max(0.5)) as f32
+        });
+        let accepted = sample_edge_with(image, q, d, hw, fixed, &cfg.sigmoid).filter(|s| {
+            // Signed contrast across the ray's left normal (−d.y, d.x), whatever the scan axis.
+            let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
+            let a = s.fit.amplitude * along_scan.signum();
+            let off = (s.point[0] - q[0]).hypot(s.point[1] - q[1]);
+            let near = off <= if out.len() < 6 { 0.35 * hw as f64 } else { tolerance };
+            let same = polarity == 0.0 || a.signum() == polarity;
+            let similar = out.len() < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
+            near && same && similar
+        });
+        let Some(s) = accepted else {
             misses += 1;
-            if misses > 3 {
+            if misses >= MAX_MISSES {
                 break;
             }
             continue;
-        }
+        };
         misses = 0;
-        anchor = s.point;
+        let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
+        let a = s.fit.amplitude * along_scan.signum();
+        if polarity == 0.0 {
+            polarity = a.signum();
+        }
+        if out.len() < 5 {
+            contrast_ref = (contrast_ref * out.len() as f64 + a.abs()) / (out.len() + 1) as f64;
+        }
         out.push(s);
-        let back = out[out.len().saturating_sub(20)].point;
-        let (dx, dy) = (s.point[0] - back[0], s.point[1] - back[1]);
-        let n = dx.hypot(dy);
-        if n >= 3.0 {
-            d = [dx / n, dy / n];
+        // Predict from a line through the recent samples rather than from the last one, so that
+        // one noisy sample neither bends the walk nor shifts the next window.
+        let recent = &out[out.len().saturating_sub(PREDICT_SAMPLES)..];
+        anchor = s.point;
+        if let Some((line_dir, on_line, spread)) = local_line(recent, d) {
+            if recent.len() >= 6 {
+                d = line_dir;
+                anchor = on_line;
+                // The line absorbs two degrees of freedom of the scatter.
+                let n = recent.len() as f64;
+                tolerance = (4.0 * spread * (n / (n - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+            }
         }
     }
-    if ended_by_change {
+    if !reached {
         if let Some(end) = out.last().map(|s| s.point) {
             out.retain(|s| dist(s.point, end) > guard + 2.0);
         }
     }
 }
+
+/// Samples behind the prediction of the next one.
+const PREDICT_SAMPLES: usize = 24;
+
+/// Least-squares line through the sample points: its unit direction (oriented like `d`), the
+/// projection of the last sample onto it, and the RMS distance of the samples to it.
+fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2], f64)> {
+    let n = samples.len() as f64;
+    if samples.len() < 2 {
+        return None;
+    }
+    let (mut mx, mut my) = (0.0, 0.0);
+    for s in samples {
+        mx += s.point[0];
+        my += s.point[1];
+    }
+    let (mx, my) = (mx / n, my / n);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for s in samples {
+        let (dx, dy) = (s.point[0] - mx, s.point[1] - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    // Principal axis of the scatter matrix.
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let mut u = [theta.cos(), theta.sin()];
+    if u[0] * d[0] + u[1] * d[1] < 0.0 {
+        u = [-u[0], -u[1]];
+    }
+    let last = samples.last()?.point;
+    let t = (last[0] - mx) * u[0] + (last[1] - my) * u[1];
+    let across = (sxx * u[1] * u[1] - 2.0 * sxy * u[0] * u[1] + syy * u[0] * u[0]).max(0.0);
+    Some((u, [mx + t * u[0], my + t * u[1]], (across / n).sqrt()))
+}
+
+/// Consecutive missed scanlines that end a walk.
+const MAX_MISSES: usize = 6;
