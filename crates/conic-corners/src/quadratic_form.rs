@@ -22,6 +22,9 @@
 //! parabola (few parameters, low variance at the corner); clearly curved, well-measured edges get the
 //! exact conic model. A conic whose second branch comes near the data is rejected outright.
 
+// `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use nalgebra::{Matrix2, Matrix3, Matrix5, Vector2, Vector3, Vector5};
 
 /// A conic `a x² + b xy + c y² + d x + e y + f = 0` in image coordinates (paper eq. 8).
@@ -547,7 +550,6 @@ fn real_cubic_roots(c3: f64, c2: f64, c1: f64, c0: f64) -> ([f64; 3], usize) {
 /// normal matrix `Σ w J Jᵀ` and gradient `Σ w r J` of the residuals `r = F / |∇F|`. Points are
 /// mapped to the frame and scaled by `inv_scale`; weights are multiplied by `wn`. `None` if a
 /// point sits on a singular point of the conic or the sums are not finite.
-thread_local!(pub static PASSES: std::cell::Cell<usize> = const { std::cell::Cell::new(0) });
 fn sampson_normal(
     points: &[[f64; 2]],
     weights: Option<&[f64]>,
@@ -556,7 +558,6 @@ fn sampson_normal(
     wn: f64,
     theta: &[f64; 5],
 ) -> Option<(f64, Matrix5<f64>, Vector5<f64>)> {
-    PASSES.with(|c| c.set(c.get() + 1));
     let [a, b, c, d, e] = *theta;
     let mut cost = 0.0;
     // Upper triangle of Σ w J Jᵀ, row by row, and Σ w r J: plain arrays keep the loop unrolled.
@@ -589,15 +590,26 @@ fn sampson_normal(
             ig,
         ];
         cost += w * r * r;
-        let mut idx = 0;
-        for (row, &jr) in j.iter().enumerate() {
-            let wj = w * jr;
-            gs[row] += wj * r;
-            for &jc in &j[row..] {
-                hu[idx] += wj * jc;
-                idx += 1;
-            }
+        let wj = j.map(|v| w * v);
+        for k in 0..5 {
+            gs[k] += wj[k] * r;
         }
+        // Spelled out so that the compiler keeps all fifteen sums in registers.
+        hu[0] += wj[0] * j[0];
+        hu[1] += wj[0] * j[1];
+        hu[2] += wj[0] * j[2];
+        hu[3] += wj[0] * j[3];
+        hu[4] += wj[0] * j[4];
+        hu[5] += wj[1] * j[1];
+        hu[6] += wj[1] * j[2];
+        hu[7] += wj[1] * j[3];
+        hu[8] += wj[1] * j[4];
+        hu[9] += wj[2] * j[2];
+        hu[10] += wj[2] * j[3];
+        hu[11] += wj[2] * j[4];
+        hu[12] += wj[3] * j[3];
+        hu[13] += wj[3] * j[4];
+        hu[14] += wj[4] * j[4];
     }
     let mut h = Matrix5::zeros();
     let mut idx = 0;
@@ -613,9 +625,12 @@ fn sampson_normal(
 }
 
 /// Gauss–Newton (with step halving) on the Sampson distance of the edge-frame conic of
-/// [`sampson_normal`]. Fixing the coefficient of `v` to −1 is a chart valid for every curve that is
-/// a graph `v(u)` near the data, which is what an edge is. Returns the parameters, the final cost
-/// and the cost at the start (so the starting parabola's geometric cost comes for free).
+/// [`sampson_normal`], from `theta` whose normal equations are `start`. Fixing the coefficient of
+/// `v` to −1 is a chart valid for every curve that is a graph `v(u)` near the data, which is what an
+/// edge is. Returns the parameters and their cost, or `None` as soon as the cost clearly cannot get
+/// below `useful` (four times Gauss–Newton's predicted decrease would not reach it), which saves
+/// the iterations on edges where the conic would lose the model choice anyway.
+#[allow(clippy::too_many_arguments)]
 fn sampson_refine(
     points: &[[f64; 2]],
     weights: Option<&[f64]>,
@@ -623,10 +638,11 @@ fn sampson_refine(
     inv_scale: f64,
     wn: f64,
     mut theta: [f64; 5],
-    n: f64,
-) -> Option<([f64; 5], f64, f64)> {
-    let (mut cost, mut h, mut g) = sampson_normal(points, weights, fr, inv_scale, wn, &theta)?;
-    let start_cost = cost;
+    start: (f64, Matrix5<f64>, Vector5<f64>),
+    useful: f64,
+) -> Option<([f64; 5], f64)> {
+    let n = fr.count as f64;
+    let (mut cost, mut h, mut g) = start;
     for _ in 0..10 {
         let step = match h.cholesky() {
             Some(ch) => ch.solve(&(-g)),
@@ -639,6 +655,9 @@ fn sampson_refine(
         // the parameters are within 10⁻⁴ standard errors of the optimum; on exact data, stop when
         // the RMS would improve by less than 10⁻¹⁰ of the extent.
         let predicted = -g.dot(&step);
+        if cost - 4.0 * predicted > useful {
+            return None;
+        }
         if !(predicted > 1e-8 * cost + 1e-20 * n) {
             break;
         }
@@ -659,7 +678,7 @@ fn sampson_refine(
             break;
         }
     }
-    Some((theta, cost, start_cost))
+    (cost <= useful).then_some((theta, cost))
 }
 
 /// Minimum over `u ∈ [u0, u1]` of `Δ(u) = (B u − 1)² − 4 C (A u² + D u + E)`, the discriminant in
@@ -684,14 +703,23 @@ fn min_branch_discriminant(theta: &[f64; 5], u0: f64, u1: f64) -> f64 {
     m
 }
 
+/// BIC weight (in units of `ln n`) of each of the conic's two extra coefficients over the
+/// parabola, instead of BIC's 1. On nearly straight data these coefficients (`uv ≈ u³`, `v² ≈ u⁴`
+/// along the edge) are nearly collinear with the parabola's, so a conic that fits the samples
+/// slightly better mostly adds variance at the corner: with 200 points at σ = 0.1 px and
+/// κ = 10⁻³ px⁻¹, the gap-centre error was 0.015 px with weight 1 and 0.012 px with 3, while
+/// wherever the parabola is really inadequate (κ = 3·10⁻³, strong perspective, any noise-free
+/// edge) the conic still wins every time.
+const CONIC_PENALTY: f64 = 3.0;
+
 /// Floor on the mean squared residual (normalized units) in the information criterion, so that
 /// noise-free data do not compare `ln 0`: 10⁻⁹ of the data extent.
 const RSS_FLOOR: f64 = 1e-18;
 
 /// Fits one checkerboard edge (sigmoid edge samples on both sides of a corner, possibly with a gap
 /// around it) with a line, an edge-frame parabola or a general conic, and keeps the model with the
-/// smallest BIC `n ln(RSS/n) + k ln n` (k = 2, 3, 5) on geometric residuals. See the module docs
-/// for why.
+/// smallest Bayesian information criterion `n ln(RSS/n) + k ln n` on geometric residuals, with
+/// `k` = 2 (line), 3 (parabola), 3 + 2·[`CONIC_PENALTY`] (conic). See the module docs for why.
 ///
 /// Steps, all in the normalized edge frame (origin at the weighted centroid, `u` along the
 /// total-least-squares line, `v` across it, unit RMS extent along `u`):
@@ -729,8 +757,8 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
     if fr.count >= 4 {
         rss_line = 0.0;
         // Algebraic parabola (vertical residuals) as the starting point.
-        let mut nm = Matrix3::zeros();
-        let mut rhs = Vector3::zeros();
+        // Weighted moments Σ w uᵏ (k = 0..4) and Σ w v uᵏ (k = 0..2).
+        let (mut mu, mut mv) = ([0.0; 5], [0.0; 3]);
         let (mut u0, mut u1) = (f64::INFINITY, f64::NEG_INFINITY);
         for (i, p) in points.iter().enumerate() {
             let w = weight(weights, i) * wn;
@@ -741,29 +769,41 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
             let (u, v) = (u * inv, v * inv);
             u0 = u0.min(u);
             u1 = u1.max(u);
-            let phi = Vector3::new(1.0, u, u * u);
-            nm.ger(w, &phi, &phi, 1.0);
-            rhs.axpy(w * v, &phi, 1.0);
+            let u2 = u * u;
+            mu[0] += w;
+            mu[1] += w * u;
+            mu[2] += w * u2;
+            mu[3] += w * u2 * u;
+            mu[4] += w * u2 * u2;
+            mv[0] += w * v;
+            mv[1] += w * v * u;
+            mv[2] += w * v * u2;
             rss_line += w * v * v;
         }
+        let nm = Matrix3::new(
+            mu[0], mu[1], mu[2], mu[1], mu[2], mu[3], mu[2], mu[3], mu[4],
+        );
+        let rhs = Vector3::from(mv);
         best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
         if let Some(sol) = nm.cholesky().map(|c| c.solve(&rhs)) {
             let par = [sol[2], 0.0, 0.0, sol[1], sol[0]];
-            let refined = if fr.count >= 6 {
-                sampson_refine(points, weights, &fr, inv, wn, par, n)
-            } else {
-                None
-            };
-            let (conic, rss_par) = match refined {
-                Some((con, rss_con, rss_par)) => (Some((con, rss_con)), rss_par),
-                None => (None, sampson_normal(points, weights, &fr, inv, wn, &par)?.0),
-            };
+            // The parabola's geometric cost, and the conic's first normal equations.
+            let start = sampson_normal(points, weights, &fr, inv, wn, &par)?;
+            let rss_par = start.0;
             let b = bic(rss_par, 3.0);
             if b < best.0 {
                 best = (b, EdgeModel::Parabola, par, rss_par);
             }
+            // The conic must bring its BIC below the best so far: RSS < n e^((BIC − k ln n)/n).
+            let k_con = 3.0 + 2.0 * CONIC_PENALTY;
+            let useful = n * ((best.0 - k_con * n.ln()) / n).exp();
+            let conic = if fr.count >= 6 && useful > n * RSS_FLOOR {
+                sampson_refine(points, weights, &fr, inv, wn, par, start, useful)
+            } else {
+                None
+            };
             if let Some((con, rss_con)) = conic {
-                let b = bic(rss_con, 5.0);
+                let b = bic(rss_con, k_con);
                 let disc = min_branch_discriminant(&con, u0, u1);
                 // The far side of a real edge's conic can be close: a circle on a cylinder seen
                 // at 5° elevation is a 600 × 50 px ellipse, its back 0.5 half-lengths from the
@@ -971,7 +1011,7 @@ fn split_degenerate(d: &Matrix3<f64>) -> Option<[Vector3<f64>; 2]> {
             return None;
         }
         let g = d.column(j) / djj.sqrt();
-        return Some([g.into(), g.into()]);
+        return Some([g, g]);
     }
     if bii > 0.0 {
         return None;
@@ -1245,23 +1285,17 @@ mod tests {
         assert!(Line::new(0.0, 0.0, 1.0).is_none());
     }
 
-    fn ellipse_points(
-        cx: f64,
-        cy: f64,
-        a: f64,
-        b: f64,
-        rot: f64,
-        t0: f64,
-        t1: f64,
-        n: usize,
-    ) -> Vec<[f64; 2]> {
+    /// `n` points at parameters `t0..=t1` on the ellipse with semi-axes 60 and 25 px rotated by
+    /// 0.4 rad, centred at `c`.
+    fn ellipse_points(c: [f64; 2], t0: f64, t1: f64, n: usize) -> Vec<[f64; 2]> {
+        let (a, b, rot) = (60.0, 25.0, 0.4f64);
         (0..n)
             .map(|i| {
                 let t = t0 + (t1 - t0) * i as f64 / (n - 1) as f64;
                 let (x, y) = (a * t.cos(), b * t.sin());
                 [
-                    cx + x * rot.cos() - y * rot.sin(),
-                    cy + x * rot.sin() + y * rot.cos(),
+                    c[0] + x * rot.cos() - y * rot.sin(),
+                    c[1] + x * rot.sin() + y * rot.cos(),
                 ]
             })
             .collect()
@@ -1271,10 +1305,10 @@ mod tests {
     fn ellipse_direct_fit() {
         // Full ellipse and a 120° arc, far from the origin, noise-free: exact.
         for (t0, t1) in [(0.0, 6.0), (0.3, 2.4)] {
-            let pts = ellipse_points(3000.0, 2000.0, 60.0, 25.0, 0.4, t0, t1, 50);
+            let pts = ellipse_points([3000.0, 2000.0], t0, t1, 50);
             let e = fit_ellipse_direct(&pts, None).unwrap();
             assert_eq!(e.kind(), ConicKind::Ellipse);
-            let probe = ellipse_points(3000.0, 2000.0, 60.0, 25.0, 0.4, 0.0, 6.2, 37);
+            let probe = ellipse_points([3000.0, 2000.0], 0.0, 6.2, 37);
             for p in &probe {
                 assert!(e.sampson_distance(p[0], p[1]).abs() < 1e-7, "{t0}");
             }
@@ -1282,12 +1316,12 @@ mod tests {
         // Noisy (0.1 px) full ellipse: residuals at the noise level.
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         let nz = Normal::new(0.0, 0.1).unwrap();
-        let pts: Vec<[f64; 2]> = ellipse_points(100.0, 50.0, 60.0, 25.0, 0.4, 0.0, 6.2, 200)
+        let pts: Vec<[f64; 2]> = ellipse_points([100.0, 50.0], 0.0, 6.2, 200)
             .into_iter()
             .map(|p| [p[0] + nz.sample(&mut rng), p[1] + nz.sample(&mut rng)])
             .collect();
         let e = fit_ellipse_direct(&pts, None).unwrap();
-        let truth = ellipse_points(100.0, 50.0, 60.0, 25.0, 0.4, 0.0, 6.2, 30);
+        let truth = ellipse_points([100.0, 50.0], 0.0, 6.2, 30);
         for p in &truth {
             assert!(e.sampson_distance(p[0], p[1]).abs() < 0.1);
         }
@@ -1373,20 +1407,34 @@ mod tests {
 
     #[test]
     fn edge_curve_with_noise() {
-        // 200 points over ±(10..100) px with 0.1 px noise: RMS error at the gap centre over seeds.
+        // 200 points over ±(10..100) px with isotropic noise σ: RMS error at the gap centre over
+        // 200 seeds, against the bound given. Mild perspective, near and far from the origin.
         let mut rng = ChaCha8Rng::seed_from_u64(7);
-        for kappa in [0.0, 1e-3, 3e-3] {
+        // (curvature, noise, bound, homography: 1 mild, 2 strong perspective)
+        let cases = [
+            (0.0, 0.1, 0.015, 1),
+            (1e-3, 0.1, 0.025, 1),
+            (2e-3, 0.1, 0.025, 1),
+            (3e-3, 0.1, 0.025, 1),
+            (1e-3, 0.1, 0.025, 2),
+            (3e-3, 0.1, 0.025, 2),
+            (0.0, 0.3, 0.04, 1),
+            (1e-3, 0.3, 0.06, 1),
+            (3e-3, 0.3, 0.06, 1),
+            (3e-3, 0.3, 0.06, 2),
+        ];
+        for (kappa, noise, bound, hk) in cases {
             for (x0, y0) in [(300.0, 200.0), (3000.0, 2000.0)] {
-                let h = homographies(x0, y0)[1];
+                let h = homographies(x0, y0)[hk];
                 let (mut se, mut se_ell, mut ne) = (0.0, 0.0, 0);
                 let mut counts = [0usize; 3];
                 for _ in 0..200 {
-                    let (pts, truth) = arc_edge(kappa, &h, 200, 10.0, 100.0, 0.1, &mut rng);
+                    let (pts, truth) = arc_edge(kappa, &h, 200, 10.0, 100.0, noise, &mut rng);
                     let fit = fit_edge_curve(&pts, None).unwrap();
                     let e = fit.curve.distance(truth[0], truth[1]);
                     se += e * e;
                     counts[fit.model as usize] += 1;
-                    assert!((fit.rms - 0.1).abs() < 0.03, "rms {}", fit.rms);
+                    assert!((fit.rms / noise - 1.0).abs() < 0.3, "rms {}", fit.rms);
                     if let Some(el) = fit_ellipse_direct(&pts, None) {
                         let e = el.sampson_distance(truth[0], truth[1]);
                         se_ell += e * e;
@@ -1395,8 +1443,11 @@ mod tests {
                 }
                 let rms = (se / 200.0).sqrt();
                 let rms_ell = (se_ell / ne.max(1) as f64).sqrt();
-                eprintln!("κ={kappa} at ({x0},{y0}): gap-centre RMS {rms:.4} px, models line/parabola/conic {counts:?}; direct ellipse {rms_ell:.4} px");
-                assert!(rms < 0.03, "κ={kappa}: {rms}");
+                eprintln!(
+                    "κ={kappa} σ={noise} H{hk} at ({x0},{y0}): gap-centre RMS {rms:.4} px, \
+                     line/parabola/conic {counts:?}; direct ellipse {rms_ell:.4} px"
+                );
+                assert!(rms < bound, "κ={kappa} σ={noise}: {rms}");
             }
         }
     }
@@ -1413,15 +1464,7 @@ mod tests {
             let h = homographies(500.0, 400.0)[seed % 3];
             let n = rng.gen_range(40..400);
             let reach = rng.gen_range(20.0..100.0);
-            let (pts, truth) = arc_edge(
-                kappa,
-                &h,
-                n,
-                10.0,
-                reach,
-                noise,
-                &mut rng,
-            );
+            let (pts, truth) = arc_edge(kappa, &h, n, 10.0, reach, noise, &mut rng);
             let fit = fit_edge_curve(&pts, None).unwrap();
             assert!(fit.curve.distance(truth[0], truth[1]).abs() < 0.3);
             let dir = apply(&h, [1.0, 0.0]);
@@ -1434,7 +1477,10 @@ mod tests {
             )
             .unwrap();
             let hits = intersect(&fit.curve, &Curve::Line(line));
-            let near = hits.iter().filter(|p| close(**p, truth, 0.25 * reach)).count();
+            let near = hits
+                .iter()
+                .filter(|p| close(**p, truth, 0.25 * reach))
+                .count();
             assert_eq!(near, 1, "seed {seed}: {hits:?} {:?}", fit.model);
         }
     }
@@ -1521,7 +1567,10 @@ mod tests {
         // evaluating them cancels 7 digits: 10⁻⁹ is the representation's limit, not the solver's.
         let pts = intersect_conics(&circle(3000.0, 2000.0, 1.0), &circle(3001.0, 2000.0, 1.0));
         assert_eq!(pts.len(), 2);
-        assert!(contains(&pts, [3000.5, 2000.0 + 0.75f64.sqrt()], 1e-8), "{pts:?}");
+        assert!(
+            contains(&pts, [3000.5, 2000.0 + 0.75f64.sqrt()], 1e-8),
+            "{pts:?}"
+        );
     }
 
     #[test]
@@ -1571,9 +1620,9 @@ mod tests {
     fn nearly_straight_conics() {
         for p in [[10.0, 20.0], [3000.0, 2000.0]] {
             for (angle, r1, r2) in [
-                (1.5708, 1000.0, 3000.0),
-                (0.5236, 400.0, -2000.0),
-                (0.5236, 1e6, 1e5),
+                (std::f64::consts::FRAC_PI_2, 1000.0, 3000.0),
+                (std::f64::consts::FRAC_PI_6, 400.0, -2000.0),
+                (std::f64::consts::FRAC_PI_6, 1e6, 1e5),
             ] {
                 let c1 = flat_ellipse(p, 0.2, r1, 3.0);
                 let c2 = flat_ellipse(p, 0.2 + angle, r2, 2.0);
@@ -1651,72 +1700,73 @@ mod tests {
     }
 
     #[test]
+    fn corner_from_two_fitted_edges() {
+        // Two curved edges through the same plane point (the corner), crossing at 90° in the plane,
+        // under mild perspective; noise-free the corner is exact, at σ = 0.1 px it is close.
+        let h = homographies(1500.0, 1000.0)[1];
+        let rot = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut se = 0.0;
+        for (i, noise) in [0.0, 0.1, 0.1, 0.1, 0.1, 0.1].into_iter().enumerate() {
+            let (a, truth) = arc_edge(2e-3, &h, 200, 10.0, 100.0, noise, &mut rng);
+            let (b, _) = arc_edge(-1e-3, &(h * rot), 200, 10.0, 100.0, noise, &mut rng);
+            let fa = fit_edge_curve(&a, None).unwrap();
+            let fb = fit_edge_curve(&b, None).unwrap();
+            let near = [truth[0] + 0.8, truth[1] - 0.6];
+            let p = nearest_intersection(&fa.curve, &fb.curve, near).unwrap();
+            let err = (p[0] - truth[0]).hypot(p[1] - truth[1]);
+            if i == 0 {
+                assert!(err < 1e-6, "noise-free corner error {err}");
+            } else {
+                se += err * err;
+            }
+        }
+        assert!((se / 5.0).sqrt() < 0.05, "{se}");
+    }
+
+    /// On-CPU time of this thread in ns (Linux schedstat), so that the measurement does not count
+    /// time spent waiting for a core on a loaded machine; wall time elsewhere.
+    fn cpu_ns() -> Option<u64> {
+        let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+        s.split_whitespace().next()?.parse().ok()
+    }
+
+    #[test]
     fn timing_fit_and_intersect_400_points() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let h = homographies(1500.0, 1000.0)[1];
         let rot = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
         let (a, truth) = arc_edge(2e-3, &h, 400, 10.0, 100.0, 0.1, &mut rng);
         let (b, _) = arc_edge(-1e-3, &(h * rot), 400, 10.0, 100.0, 0.1, &mut rng);
-        let reps = 200;
-        let t0 = std::time::Instant::now();
-        let mut acc = 0.0;
-        for _ in 0..reps {
-            let fa = fit_edge_curve(std::hint::black_box(&a), None).unwrap();
-            let fb = fit_edge_curve(std::hint::black_box(&b), None).unwrap();
-            let p = nearest_intersection(&fa.curve, &fb.curve, truth).unwrap();
-            acc += p[0];
-        }
-        let per = t0.elapsed().as_secs_f64() / reps as f64;
-        PASSES.with(|c| c.set(0));
-        let fa = fit_edge_curve(&a, None).unwrap();
-        eprintln!("passes a {}", PASSES.with(|c| c.get()));
-        PASSES.with(|c| c.set(0));
-        let fa = fit_edge_curve(&b, None).unwrap();
-        eprintln!("passes b {}", PASSES.with(|c| c.get()));
-        let t1 = std::time::Instant::now();
-        for _ in 0..reps { std::hint::black_box(sampson_normal(&a, None, &principal_frame(&a, None).unwrap(), 0.01, 1.0, &[0.0;5])); }
-        eprintln!("pass {:?}", t1.elapsed() / reps);
-        eprintln!(
-            "two 400-point edge fits + intersection: {:.1} µs ({acc:.0})",
-            per * 1e6
-        );
         let fa = fit_edge_curve(&a, None).unwrap();
         let fb = fit_edge_curve(&b, None).unwrap();
-        let p = nearest_intersection(&fa.curve, &fb.curve, truth).unwrap();
+        // schedstat advances at scheduler ticks: run each measurement for ~50 ms.
+        let time = |reps: u32, f: &dyn Fn() -> f64| {
+            let (w0, c0) = (std::time::Instant::now(), cpu_ns());
+            let mut acc = 0.0;
+            for _ in 0..reps {
+                acc += f();
+            }
+            let wall = w0.elapsed().as_secs_f64() * 1e9;
+            let ns = match (c0, cpu_ns()) {
+                (Some(c0), Some(c1)) => (c1 - c0) as f64,
+                _ => wall,
+            };
+            std::hint::black_box(acc);
+            ns / reps as f64 / 1e3
+        };
+        let t_a = time(3000, &|| {
+            fit_edge_curve(std::hint::black_box(&a), None).unwrap().rms
+        });
+        let t_b = time(3000, &|| {
+            fit_edge_curve(std::hint::black_box(&b), None).unwrap().rms
+        });
+        let t_x = time(30000, &|| {
+            nearest_intersection(std::hint::black_box(&fa.curve), &fb.curve, truth).unwrap()[0]
+        });
         eprintln!(
-            "models {:?} {:?}, corner error {:.4} px",
-            fa.model,
-            fb.model,
-            (p[0] - truth[0]).hypot(p[1] - truth[1])
+            "400-point edge fit: {t_a:.1} µs ({:?}), {t_b:.1} µs ({:?}); intersection {t_x:.2} µs",
+            fa.model, fb.model
         );
-    }
-}
-#[cfg(test)]
-mod scratch {
-    use super::*;
-    #[test]
-    fn dbg_fit() {
-        for x0 in [320.0, 3000.0] {
-        let h = Matrix3::new(0.6, 0.7, x0, -0.8, 0.5, x0*2.0/3.0, -1.5e-3, 1e-3, 1.0);
-        let kappa = 3e-3;
-        let pts: Vec<[f64;2]> = (0..200).map(|i| {
-            let t = (i as f64 + 0.5) / 200.0 * 2.0 - 1.0;
-            let s = t.signum() * (10.0 + 90.0 * t.abs());
-            let q = [(kappa * s).sin() / kappa, (1.0 - (kappa * s).cos()) / kappa];
-            let v = h * Vector3::new(q[0], q[1], 1.0);
-            [v[0] / v[2], v[1] / v[2]]
-        }).collect();
-        let fr = principal_frame(&pts, None).unwrap();
-        let inv = 1.0 / fr.var_t.sqrt();
-        eprintln!("x0 {x0} scale {}", fr.var_t.sqrt());
-        let fit = fit_edge_curve(&pts, None).unwrap();
-        eprintln!("{:?}", fit);
-        let t0 = std::time::Instant::now();
-        for _ in 0..1000 { std::hint::black_box(fit_edge_curve(std::hint::black_box(&pts), None)); }
-        eprintln!("fit {:?}", t0.elapsed() / 1000);
-        let t0 = std::time::Instant::now();
-        for _ in 0..1000 { std::hint::black_box(principal_frame(std::hint::black_box(&pts), None)); }
-        eprintln!("frame {:?}", t0.elapsed() / 1000);
-        }
     }
 }
