@@ -21,6 +21,13 @@
 //! with the smallest Bayesian information criterion. Straight or noisy edges get a line or a
 //! parabola (few parameters, low variance at the corner); clearly curved, well-measured edges get the
 //! exact conic model. A conic whose second branch comes near the data is rejected outright.
+//!
+//! Measured in this module's tests (200 samples over ±10…±100 px of a circle arc seen under a
+//! homography, distance of the fitted curve from the true gap centre): noise-free, at most
+//! 4·10⁻⁸ px for κ = 0…3·10⁻³ px⁻¹, near the origin or at (3000, 2000); RMS over 200 seeds at
+//! σ = 0.1 px, 0.007 px (κ = 0), 0.011–0.016 px (κ = 10⁻³…3·10⁻³, mild or strong perspective); at
+//! σ = 0.3 px, 0.025–0.045 px. The direct ellipse fit on the same data: 0.09–0.12 px at
+//! σ = 0.1 px for curved edges, and tens of pixels on straight ones.
 
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -242,7 +249,9 @@ impl Line {
 /// A curve fitted to one edge: a line or a conic.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Curve {
+    /// A straight edge.
     Line(Line),
+    /// A curved edge (a parabola or general conic in image coordinates).
     Conic(Conic),
 }
 
@@ -545,11 +554,15 @@ fn real_cubic_roots(c3: f64, c2: f64, c1: f64, c0: f64) -> ([f64; 3], usize) {
     (out, n)
 }
 
+/// Points per block in [`sampson_normal`]: the per-point work is written over fixed-size lane
+/// arrays so that the compiler can vectorize it.
+const LANES: usize = 4;
+
 /// Weighted sum of squared Sampson distances of the points to the edge-frame conic
 /// `F(u, v) = A u² + B uv + C v² + D u + E − v` (`θ = [A, B, C, D, E]`), with the Gauss–Newton
 /// normal matrix `Σ w J Jᵀ` and gradient `Σ w r J` of the residuals `r = F / |∇F|`. Points are
 /// mapped to the frame and scaled by `inv_scale`; weights are multiplied by `wn`. `None` if a
-/// point sits on a singular point of the conic or the sums are not finite.
+/// weighted point sits on a singular point of the conic or the sums are not finite.
 fn sampson_normal(
     points: &[[f64; 2]],
     weights: Option<&[f64]>,
@@ -559,68 +572,71 @@ fn sampson_normal(
     theta: &[f64; 5],
 ) -> Option<(f64, Matrix5<f64>, Vector5<f64>)> {
     let [a, b, c, d, e] = *theta;
-    let mut cost = 0.0;
-    // Upper triangle of Σ w J Jᵀ, row by row, and Σ w r J: plain arrays keep the loop unrolled.
-    let mut hu = [0.0; 15];
-    let mut gs = [0.0; 5];
-    for (i, p) in points.iter().enumerate() {
-        let w = weight(weights, i) * wn;
-        if w <= 0.0 {
-            continue;
+    // Per-lane partial sums: cost, upper triangle of Σ w J Jᵀ (row by row), Σ w r J.
+    let mut cost = [0.0; LANES];
+    let mut hu = [[0.0; LANES]; 15];
+    let mut gs = [[0.0; LANES]; 5];
+    let mut singular = false;
+    for start in (0..points.len()).step_by(LANES) {
+        let (mut u, mut v, mut w) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+        for l in 0..LANES.min(points.len() - start) {
+            let [pu, pv] = fr.local(points[start + l]);
+            u[l] = pu * inv_scale;
+            v[l] = pv * inv_scale;
+            w[l] = weight(weights, start + l) * wn;
         }
-        let [u, v] = fr.local(*p);
-        let (u, v) = (u * inv_scale, v * inv_scale);
-        let f = u * (a * u + b * v + d) + v * (c * v - 1.0) + e;
-        let fx = 2.0 * a * u + b * v + d;
-        let fy = b * u + 2.0 * c * v - 1.0;
-        // Not `hypot`: it is several times slower, and |∇F| ≈ 1 here cannot overflow.
-        let gn = (fx * fx + fy * fy).sqrt();
-        if !(gn > 0.0) {
-            return None;
+        let mut j = [[0.0; LANES]; 5];
+        let mut r = [0.0; LANES];
+        for l in 0..LANES {
+            let (u, v) = (u[l], v[l]);
+            let f = u * (a * u + b * v + d) + v * (c * v - 1.0) + e;
+            let fx = 2.0 * a * u + b * v + d;
+            let fy = b * u + 2.0 * c * v - 1.0;
+            // Not `hypot`: it is several times slower, and |∇F| ≈ 1 here cannot overflow.
+            let gn2 = fx * fx + fy * fy;
+            singular |= w[l] > 0.0 && !(gn2 > 0.0);
+            let ig = 1.0 / gn2.sqrt();
+            r[l] = f * ig;
+            // ∂r/∂θ = (∂F/∂θ − r ∂|∇F|/∂θ) / |∇F|, with |∇F| ∂|∇F|/∂θ = F_x ∂F_x/∂θ + F_y ∂F_y/∂θ.
+            let k = r[l] * ig;
+            j[0][l] = (u * u - k * 2.0 * u * fx) * ig;
+            j[1][l] = (u * v - k * (v * fx + u * fy)) * ig;
+            j[2][l] = (v * v - k * 2.0 * v * fy) * ig;
+            j[3][l] = (u - k * fx) * ig;
+            j[4][l] = ig;
         }
-        let ig = 1.0 / gn;
-        let r = f * ig;
-        // ∂r/∂θ = (∂F/∂θ − r ∂|∇F|/∂θ) / |∇F|, with |∇F| ∂|∇F|/∂θ = F_x ∂F_x/∂θ + F_y ∂F_y/∂θ.
-        let k = r * ig;
-        let j = [
-            (u * u - k * 2.0 * u * fx) * ig,
-            (u * v - k * (v * fx + u * fy)) * ig,
-            (v * v - k * 2.0 * v * fy) * ig,
-            (u - k * fx) * ig,
-            ig,
-        ];
-        cost += w * r * r;
-        let wj = j.map(|v| w * v);
-        for k in 0..5 {
-            gs[k] += wj[k] * r;
+        for l in 0..LANES {
+            // Zero-weight (and padding) lanes must not bring NaN from a singular point.
+            let wl = if w[l] > 0.0 { w[l] } else { 0.0 };
+            let (rl, jl) = (if wl > 0.0 { r[l] } else { 0.0 }, j.map(|row| row[l]));
+            let jl = if wl > 0.0 { jl } else { [0.0; 5] };
+            cost[l] += wl * rl * rl;
+            let mut idx = 0;
+            for row in 0..5 {
+                let wj = wl * jl[row];
+                gs[row][l] += wj * rl;
+                for col in row..5 {
+                    hu[idx][l] += wj * jl[col];
+                    idx += 1;
+                }
+            }
         }
-        // Spelled out so that the compiler keeps all fifteen sums in registers.
-        hu[0] += wj[0] * j[0];
-        hu[1] += wj[0] * j[1];
-        hu[2] += wj[0] * j[2];
-        hu[3] += wj[0] * j[3];
-        hu[4] += wj[0] * j[4];
-        hu[5] += wj[1] * j[1];
-        hu[6] += wj[1] * j[2];
-        hu[7] += wj[1] * j[3];
-        hu[8] += wj[1] * j[4];
-        hu[9] += wj[2] * j[2];
-        hu[10] += wj[2] * j[3];
-        hu[11] += wj[2] * j[4];
-        hu[12] += wj[3] * j[3];
-        hu[13] += wj[3] * j[4];
-        hu[14] += wj[4] * j[4];
+    }
+    if singular {
+        return None;
     }
     let mut h = Matrix5::zeros();
     let mut idx = 0;
     for row in 0..5 {
         for col in row..5 {
-            h[(row, col)] = hu[idx];
-            h[(col, row)] = hu[idx];
+            let v: f64 = hu[idx].iter().sum();
+            h[(row, col)] = v;
+            h[(col, row)] = v;
             idx += 1;
         }
     }
-    let g = Vector5::from(gs);
+    let g = Vector5::from(gs.map(|lane| lane.iter().sum::<f64>()));
+    let cost: f64 = cost.iter().sum();
     cost.is_finite().then_some((cost, h, g))
 }
 
@@ -710,7 +726,7 @@ fn min_branch_discriminant(theta: &[f64; 5], u0: f64, u1: f64) -> f64 {
 /// κ = 10⁻³ px⁻¹, the gap-centre error was 0.015 px with weight 1 and 0.012 px with 3, while
 /// wherever the parabola is really inadequate (κ = 3·10⁻³, strong perspective, any noise-free
 /// edge) the conic still wins every time.
-const CONIC_PENALTY: f64 = 3.0;
+pub const CONIC_PENALTY: f64 = 3.0;
 
 /// Floor on the mean squared residual (normalized units) in the information criterion, so that
 /// noise-free data do not compare `ln 0`: 10⁻⁹ of the data extent.
