@@ -606,17 +606,20 @@ fn sampson_normal(
             j[4][l] = ig;
         }
         for l in 0..LANES {
-            // Zero-weight (and padding) lanes must not bring NaN from a singular point.
-            let wl = if w[l] > 0.0 { w[l] } else { 0.0 };
-            let (rl, jl) = (if wl > 0.0 { r[l] } else { 0.0 }, j.map(|row| row[l]));
-            let jl = if wl > 0.0 { jl } else { [0.0; 5] };
+            // Zero-weight and padding lanes contribute nothing, not even a NaN from a singular
+            // point (0 · NaN would be NaN).
+            let (wl, rl, jl) = if w[l] > 0.0 {
+                (w[l], r[l], j.map(|row| row[l]))
+            } else {
+                (0.0, 0.0, [0.0; 5])
+            };
             cost[l] += wl * rl * rl;
             let mut idx = 0;
             for row in 0..5 {
                 let wj = wl * jl[row];
                 gs[row][l] += wj * rl;
-                for col in row..5 {
-                    hu[idx][l] += wj * jl[col];
+                for &jc in &jl[row..] {
+                    hu[idx][l] += wj * jc;
                     idx += 1;
                 }
             }
