@@ -775,8 +775,8 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
     let mut best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
     if fr.count >= 4 {
         rss_line = 0.0;
-        // Algebraic parabola (vertical residuals) as the starting point.
-        // Weighted moments Σ w uᵏ (k = 0..4) and Σ w v uᵏ (k = 0..2).
+        // Algebraic parabola (vertical residuals) from the weighted moments Σ w uᵏ (k = 0..4) and
+        // Σ w v uᵏ (k = 0..2).
         let (mut mu, mut mv) = ([0.0; 5], [0.0; 3]);
         let (mut u0, mut u1) = (f64::INFINITY, f64::NEG_INFINITY);
         for (i, p) in points.iter().enumerate() {
@@ -804,10 +804,14 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
         );
         let rhs = Vector3::from(mv);
         best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
-        if let Some(sol) = nm.cholesky().map(|c| c.solve(&rhs)) {
-            let par = [sol[2], 0.0, 0.0, sol[1], sol[0]];
-            // The parabola's geometric cost, and the conic's first normal equations.
-            let start = sampson_normal(points, weights, &fr, inv, wn, &par)?;
+        let par = nm
+            .cholesky()
+            .map(|c| c.solve(&rhs))
+            .map(|sol| [sol[2], 0.0, 0.0, sol[1], sol[0]]);
+        // The parabola's geometric cost, and the conic's first normal equations.
+        let start =
+            par.and_then(|par| Some((par, sampson_normal(points, weights, &fr, inv, wn, &par)?)));
+        if let Some((par, start)) = start {
             let rss_par = start.0;
             let b = bic(rss_par, 3.0);
             if b < best.0 {
