@@ -21,8 +21,18 @@
 //! with the smallest Bayesian information criterion. Straight or noisy edges get a line or a
 //! parabola (few parameters, low variance at the corner); clearly curved, well-measured edges get the
 //! exact conic model. A conic whose second branch comes near the data is rejected outright.
+//!
+//! Measured in this module's tests (200 samples over ±10…±100 px of a circle arc seen under a
+//! homography, distance of the fitted curve from the true gap centre): noise-free, at most
+//! 4·10⁻⁸ px for κ = 0…3·10⁻³ px⁻¹, near the origin or at (3000, 2000); RMS over 200 seeds at
+//! σ = 0.1 px, 0.007 px (κ = 0), 0.011–0.016 px (κ = 10⁻³…3·10⁻³, mild or strong perspective); at
+//! σ = 0.3 px, 0.025–0.045 px. The direct ellipse fit on the same data: 0.09–0.12 px at
+//! σ = 0.1 px for curved edges, and tens of pixels on straight ones.
 
-use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
+// `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use nalgebra::{Matrix2, Matrix3, Matrix5, Vector2, Vector3, Vector5};
 
 /// A conic `a x² + b xy + c y² + d x + e y + f = 0` in image coordinates (paper eq. 8).
 ///
@@ -148,7 +158,9 @@ impl Conic {
             return ConicKind::Degenerate;
         }
         let lin = 0.5 * d.hypot(e);
-        let k = (lin / quad).max((f.abs() / quad).sqrt()).max(f64::MIN_POSITIVE);
+        let k = (lin / quad)
+            .max((f.abs() / quad).sqrt())
+            .max(f64::MIN_POSITIVE);
         let s = Matrix3::from_diagonal(&Vector3::new(k, k, 1.0));
         let q = s * self.matrix() * s;
         let n = q.norm();
@@ -237,7 +249,9 @@ impl Line {
 /// A curve fitted to one edge: a line or a conic.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Curve {
+    /// A straight edge.
     Line(Line),
+    /// A curved edge (a parabola or general conic in image coordinates).
     Conic(Conic),
 }
 
@@ -540,74 +554,137 @@ fn real_cubic_roots(c3: f64, c2: f64, c1: f64, c0: f64) -> ([f64; 3], usize) {
     (out, n)
 }
 
-/// Gauss–Newton on the Sampson distance of the edge-frame conic
-/// `F(u, v) = A u² + B uv + C v² + D u + E − v` (parameters `θ = [A, B, C, D, E]`; fixing the
-/// coefficient of `v` to −1 is a chart valid for every curve that is a graph `v(u)` near the data,
-/// which is what an edge is). Only the parameters listed in `active` move. Points are mapped to the
-/// frame and scaled by `inv_scale`; weights are multiplied by `wn` (normalizes them to mean 1).
-/// Returns the parameters and the weighted sum of squared Sampson distances (normalized units).
-fn sampson_refine<const K: usize>(
+/// Points per block in [`sampson_normal`]: the per-point work is written over fixed-size lane
+/// arrays so that the compiler can vectorize it.
+const LANES: usize = 4;
+
+/// Weighted sum of squared Sampson distances of the points to the edge-frame conic
+/// `F(u, v) = A u² + B uv + C v² + D u + E − v` (`θ = [A, B, C, D, E]`), with the Gauss–Newton
+/// normal matrix `Σ w J Jᵀ` and gradient `Σ w r J` of the residuals `r = F / |∇F|`. Points are
+/// mapped to the frame and scaled by `inv_scale`; weights are multiplied by `wn`. `None` if a
+/// weighted point sits on a singular point of the conic or the sums are not finite.
+fn sampson_normal(
+    points: &[[f64; 2]],
+    weights: Option<&[f64]>,
+    fr: &Frame,
+    inv_scale: f64,
+    wn: f64,
+    theta: &[f64; 5],
+) -> Option<(f64, Matrix5<f64>, Vector5<f64>)> {
+    let [a, b, c, d, e] = *theta;
+    // Per-lane partial sums: cost, upper triangle of Σ w J Jᵀ (row by row), Σ w r J.
+    let mut cost = [0.0; LANES];
+    let mut hu = [[0.0; LANES]; 15];
+    let mut gs = [[0.0; LANES]; 5];
+    let mut singular = false;
+    for start in (0..points.len()).step_by(LANES) {
+        let (mut u, mut v, mut w) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+        for l in 0..LANES.min(points.len() - start) {
+            let [pu, pv] = fr.local(points[start + l]);
+            u[l] = pu * inv_scale;
+            v[l] = pv * inv_scale;
+            w[l] = weight(weights, start + l) * wn;
+        }
+        let mut j = [[0.0; LANES]; 5];
+        let mut r = [0.0; LANES];
+        for l in 0..LANES {
+            let (u, v) = (u[l], v[l]);
+            let f = u * (a * u + b * v + d) + v * (c * v - 1.0) + e;
+            let fx = 2.0 * a * u + b * v + d;
+            let fy = b * u + 2.0 * c * v - 1.0;
+            // Not `hypot`: it is several times slower, and |∇F| ≈ 1 here cannot overflow.
+            let gn2 = fx * fx + fy * fy;
+            singular |= w[l] > 0.0 && !(gn2 > 0.0);
+            let ig = 1.0 / gn2.sqrt();
+            r[l] = f * ig;
+            // ∂r/∂θ = (∂F/∂θ − r ∂|∇F|/∂θ) / |∇F|, with |∇F| ∂|∇F|/∂θ = F_x ∂F_x/∂θ + F_y ∂F_y/∂θ.
+            let k = r[l] * ig;
+            j[0][l] = (u * u - k * 2.0 * u * fx) * ig;
+            j[1][l] = (u * v - k * (v * fx + u * fy)) * ig;
+            j[2][l] = (v * v - k * 2.0 * v * fy) * ig;
+            j[3][l] = (u - k * fx) * ig;
+            j[4][l] = ig;
+        }
+        for l in 0..LANES {
+            // Zero-weight and padding lanes contribute nothing, not even a NaN from a singular
+            // point (0 · NaN would be NaN).
+            let (wl, rl, jl) = if w[l] > 0.0 {
+                (w[l], r[l], j.map(|row| row[l]))
+            } else {
+                (0.0, 0.0, [0.0; 5])
+            };
+            cost[l] += wl * rl * rl;
+            let mut idx = 0;
+            for row in 0..5 {
+                let wj = wl * jl[row];
+                gs[row][l] += wj * rl;
+                for &jc in &jl[row..] {
+                    hu[idx][l] += wj * jc;
+                    idx += 1;
+                }
+            }
+        }
+    }
+    if singular {
+        return None;
+    }
+    let mut h = Matrix5::zeros();
+    let mut idx = 0;
+    for row in 0..5 {
+        for col in row..5 {
+            let v: f64 = hu[idx].iter().sum();
+            h[(row, col)] = v;
+            h[(col, row)] = v;
+            idx += 1;
+        }
+    }
+    let g = Vector5::from(gs.map(|lane| lane.iter().sum::<f64>()));
+    let cost: f64 = cost.iter().sum();
+    cost.is_finite().then_some((cost, h, g))
+}
+
+/// Gauss–Newton (with step halving) on the Sampson distance of the edge-frame conic of
+/// [`sampson_normal`], from `theta` whose normal equations are `start`. Fixing the coefficient of
+/// `v` to −1 is a chart valid for every curve that is a graph `v(u)` near the data, which is what an
+/// edge is. Returns the parameters and their cost, or `None` as soon as the cost clearly cannot get
+/// below `useful` (four times Gauss–Newton's predicted decrease would not reach it), which saves
+/// the iterations on edges where the conic would lose the model choice anyway.
+#[allow(clippy::too_many_arguments)]
+fn sampson_refine(
     points: &[[f64; 2]],
     weights: Option<&[f64]>,
     fr: &Frame,
     inv_scale: f64,
     wn: f64,
     mut theta: [f64; 5],
-    active: [usize; K],
+    start: (f64, Matrix5<f64>, Vector5<f64>),
+    useful: f64,
 ) -> Option<([f64; 5], f64)> {
-    type Normal<const K: usize> = (f64, SMatrix<f64, K, K>, SVector<f64, K>);
-    let pass = |th: &[f64; 5]| -> Option<Normal<K>> {
-        let [a, b, c, d, _] = *th;
-        let mut cost = 0.0;
-        let mut h = SMatrix::<f64, K, K>::zeros();
-        let mut g = SVector::<f64, K>::zeros();
-        for (i, p) in points.iter().enumerate() {
-            let w = weight(weights, i) * wn;
-            if w <= 0.0 {
-                continue;
-            }
-            let [u, v] = fr.local(*p);
-            let (u, v) = (u * inv_scale, v * inv_scale);
-            let f = u * (a * u + b * v + d) + v * (c * v - 1.0) + th[4];
-            let fx = 2.0 * a * u + b * v + d;
-            let fy = b * u + 2.0 * c * v - 1.0;
-            let gn = fx.hypot(fy);
-            if !(gn > 0.0) {
-                return None;
-            }
-            let r = f / gn;
-            let df = [u * u, u * v, v * v, u, 1.0];
-            // d|∇F|/dθ · |∇F|
-            let dg = [2.0 * u * fx, v * fx + u * fy, 2.0 * v * fy, fx, 0.0];
-            let j = SVector::<f64, K>::from_fn(|k, _| {
-                let m = active[k];
-                (df[m] - r * dg[m] / gn) / gn
-            });
-            cost += w * r * r;
-            h.ger(w, &j, &j, 1.0);
-            g.axpy(w * r, &j, 1.0);
-        }
-        cost.is_finite().then_some((cost, h, g))
-    };
-    let (mut cost, mut h, mut g) = pass(&theta)?;
-    for _ in 0..12 {
+    let n = fr.count as f64;
+    let (mut cost, mut h, mut g) = start;
+    for _ in 0..10 {
         let step = match h.cholesky() {
             Some(ch) => ch.solve(&(-g)),
             None => {
                 let damp = 1e-12 * h.trace().max(f64::MIN_POSITIVE);
-                (h + SMatrix::<f64, K, K>::identity() * damp)
-                    .cholesky()?
-                    .solve(&(-g))
+                (h + Matrix5::identity() * damp).cholesky()?.solve(&(-g))
             }
         };
+        // Gauss–Newton's predicted decrease gᵀH⁻¹g: once it is a negligible fraction of the cost,
+        // the parameters are within 10⁻⁴ standard errors of the optimum; on exact data, stop when
+        // the RMS would improve by less than 10⁻¹⁰ of the extent.
+        let predicted = -g.dot(&step);
+        if cost - 4.0 * predicted > useful {
+            return None;
+        }
+        if !(predicted > 1e-8 * cost + 1e-20 * n) {
+            break;
+        }
         let mut accepted = false;
         let mut t = 1.0;
-        for _ in 0..6 {
-            let mut cand = theta;
-            for (k, &m) in active.iter().enumerate() {
-                cand[m] += t * step[k];
-            }
-            if let Some((c2, h2, g2)) = pass(&cand) {
+        for _ in 0..4 {
+            let cand: [f64; 5] = std::array::from_fn(|k| theta[k] + t * step[k]);
+            if let Some((c2, h2, g2)) = sampson_normal(points, weights, fr, inv_scale, wn, &cand) {
                 if c2 <= cost {
                     (theta, cost, h, g) = (cand, c2, h2, g2);
                     accepted = true;
@@ -616,12 +693,11 @@ fn sampson_refine<const K: usize>(
             }
             t *= 0.5;
         }
-        let size = theta.iter().map(|v| v.abs()).fold(1.0, f64::max);
-        if !accepted || t * step.amax() <= 1e-13 * size {
+        if !accepted {
             break;
         }
     }
-    Some((theta, cost))
+    (cost <= useful).then_some((theta, cost))
 }
 
 /// Minimum over `u ∈ [u0, u1]` of `Δ(u) = (B u − 1)² − 4 C (A u² + D u + E)`, the discriminant in
@@ -630,7 +706,11 @@ fn sampson_refine<const K: usize>(
 fn min_branch_discriminant(theta: &[f64; 5], u0: f64, u1: f64) -> f64 {
     let [a, b, c, d, e] = *theta;
     // Δ(u) = k2 u² + k1 u + k0
-    let (k2, k1, k0) = (b * b - 4.0 * c * a, -2.0 * b - 4.0 * c * d, 1.0 - 4.0 * c * e);
+    let (k2, k1, k0) = (
+        b * b - 4.0 * c * a,
+        -2.0 * b - 4.0 * c * d,
+        1.0 - 4.0 * c * e,
+    );
     let at = |u: f64| (k2 * u + k1) * u + k0;
     let mut m = at(u0).min(at(u1));
     if k2 > 0.0 {
@@ -642,23 +722,35 @@ fn min_branch_discriminant(theta: &[f64; 5], u0: f64, u1: f64) -> f64 {
     m
 }
 
+/// BIC weight (in units of `ln n`) of each of the conic's two extra coefficients over the
+/// parabola, instead of BIC's 1. On nearly straight data these coefficients (`uv ≈ u³`, `v² ≈ u⁴`
+/// along the edge) are nearly collinear with the parabola's, so a conic that fits the samples
+/// slightly better mostly adds variance at the corner: with 200 points at σ = 0.1 px and
+/// κ = 10⁻³ px⁻¹, the gap-centre error was 0.015 px with weight 1 and 0.012 px with 3, while
+/// wherever the parabola is really inadequate (κ = 3·10⁻³, strong perspective, any noise-free
+/// edge) the conic still wins every time.
+pub const CONIC_PENALTY: f64 = 3.0;
+
 /// Floor on the mean squared residual (normalized units) in the information criterion, so that
 /// noise-free data do not compare `ln 0`: 10⁻⁹ of the data extent.
 const RSS_FLOOR: f64 = 1e-18;
 
 /// Fits one checkerboard edge (sigmoid edge samples on both sides of a corner, possibly with a gap
 /// around it) with a line, an edge-frame parabola or a general conic, and keeps the model with the
-/// smallest BIC `n ln(RSS/n) + k ln n` (k = 2, 3, 5) on geometric residuals. See the module docs
-/// for why.
+/// smallest Bayesian information criterion `n ln(RSS/n) + k ln n` on geometric residuals, with
+/// `k` = 2 (line), 3 (parabola), 3 + 2·[`CONIC_PENALTY`] (conic). See the module docs for why.
 ///
 /// Steps, all in the normalized edge frame (origin at the weighted centroid, `u` along the
 /// total-least-squares line, `v` across it, unit RMS extent along `u`):
 /// 1. line: the TLS line (exact orthogonal-distance optimum);
-/// 2. parabola: linear least squares for `v = a + b u + c u²`, then Gauss–Newton on the Sampson
-///    distance of `c u² + b u + a − v = 0`;
+/// 2. parabola: linear least squares for `v = a + b u + c u²` (vertical residuals: for the
+///    slopes of an edge, below ~0.3 in this frame, they differ from orthogonal ones by < 5 % in
+///    weight and not at all on exact data), scored by its Sampson distances;
 /// 3. conic: Gauss–Newton on the Sampson distance of `A u² + B uv + C v² + D u + E − v = 0`
 ///    started from the parabola, so it cannot run off to a distant solution. It is discarded if
-///    its second branch comes within one RMS extent of the data (a hyperbola folding back).
+///    its second branch comes within a quarter of the data's half-length (a fold-back that could
+///    put a spurious intersection next to the corner) or the curve stops being a graph over the
+///    data.
 ///
 /// `weights` (default 1) must be finite and ≥ 0. Needs ≥ 3 weighted points (≥ 4 for the parabola,
 /// ≥ 6 for the conic). `None` on bad input or if all points coincide.
@@ -675,14 +767,17 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
     let n = fr.count as f64;
     let wn = n / fr.sum_w;
     let line = line_of_frame(&fr)?;
-    let rss_line = fr.var_n * n * inv * inv;
     let bic = |rss: f64, k: f64| n * (rss / n).max(RSS_FLOOR).ln() + k * n.ln();
-    let mut best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
 
+    // The line's residuals are summed from the points: `fr.var_n` is a difference of eigenvalue
+    // terms and would put a cancellation floor (10⁻¹⁶ of the extent) under a straight edge.
+    let mut rss_line = fr.var_n * n * inv * inv;
+    let mut best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
     if fr.count >= 4 {
-        // Algebraic parabola (vertical residuals) as the starting point.
-        let mut nm = Matrix3::zeros();
-        let mut rhs = Vector3::zeros();
+        rss_line = 0.0;
+        // Algebraic parabola (vertical residuals) from the weighted moments Σ w uᵏ (k = 0..4) and
+        // Σ w v uᵏ (k = 0..2).
+        let (mut mu, mut mv) = ([0.0; 5], [0.0; 3]);
         let (mut u0, mut u1) = (f64::INFINITY, f64::NEG_INFINITY);
         for (i, p) in points.iter().enumerate() {
             let w = weight(weights, i) * wn;
@@ -693,29 +788,53 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
             let (u, v) = (u * inv, v * inv);
             u0 = u0.min(u);
             u1 = u1.max(u);
-            let phi = Vector3::new(1.0, u, u * u);
-            nm.ger(w, &phi, &phi, 1.0);
-            rhs.axpy(w * v, &phi, 1.0);
+            let u2 = u * u;
+            mu[0] += w;
+            mu[1] += w * u;
+            mu[2] += w * u2;
+            mu[3] += w * u2 * u;
+            mu[4] += w * u2 * u2;
+            mv[0] += w * v;
+            mv[1] += w * v * u;
+            mv[2] += w * v * u2;
+            rss_line += w * v * v;
         }
-        if let Some(sol) = nm.cholesky().map(|c| c.solve(&rhs)) {
-            let start = [sol[2], 0.0, 0.0, sol[1], sol[0]];
-            if let Some((par, rss_par)) =
-                sampson_refine(points, weights, &fr, inv, wn, start, [0, 3, 4])
-            {
-                let b = bic(rss_par, 3.0);
-                if b < best.0 {
-                    best = (b, EdgeModel::Parabola, par, rss_par);
-                }
-                if fr.count >= 6 {
-                    if let Some((con, rss_con)) =
-                        sampson_refine(points, weights, &fr, inv, wn, par, [0, 1, 2, 3, 4])
-                    {
-                        let b = bic(rss_con, 5.0);
-                        let disc = min_branch_discriminant(&con, u0, u1);
-                        if b < best.0 && disc > 0.0 && disc >= con[2] * con[2] {
-                            best = (b, EdgeModel::Conic, con, rss_con);
-                        }
-                    }
+        let nm = Matrix3::new(
+            mu[0], mu[1], mu[2], mu[1], mu[2], mu[3], mu[2], mu[3], mu[4],
+        );
+        let rhs = Vector3::from(mv);
+        best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
+        let par = nm
+            .cholesky()
+            .map(|c| c.solve(&rhs))
+            .map(|sol| [sol[2], 0.0, 0.0, sol[1], sol[0]]);
+        // The parabola's geometric cost, and the conic's first normal equations.
+        let start =
+            par.and_then(|par| Some((par, sampson_normal(points, weights, &fr, inv, wn, &par)?)));
+        if let Some((par, start)) = start {
+            let rss_par = start.0;
+            let b = bic(rss_par, 3.0);
+            if b < best.0 {
+                best = (b, EdgeModel::Parabola, par, rss_par);
+            }
+            // The conic must bring its BIC below the best so far: RSS < n e^((BIC − k ln n)/n).
+            let k_con = 3.0 + 2.0 * CONIC_PENALTY;
+            let useful = n * ((best.0 - k_con * n.ln()) / n).exp();
+            let conic = if fr.count >= 6 && useful > n * RSS_FLOOR {
+                sampson_refine(points, weights, &fr, inv, wn, par, start, useful)
+            } else {
+                None
+            };
+            if let Some((con, rss_con)) = conic {
+                let b = bic(rss_con, k_con);
+                let disc = min_branch_discriminant(&con, u0, u1);
+                // The far side of a real edge's conic can be close: a circle on a cylinder seen
+                // at 5° elevation is a 600 × 50 px ellipse, its back 0.5 half-lengths from the
+                // data. Only a branch much closer than that is taken for a noise-fitted fold-back
+                // (it could produce a spurious intersection next to the corner).
+                let min_sep = 0.25 * u0.abs().max(u1.abs());
+                if b < best.0 && disc > 0.0 && disc >= (con[2] * min_sep).powi(2) {
+                    best = (b, EdgeModel::Conic, con, rss_con);
                 }
             }
         }
@@ -739,17 +858,7 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
 /// frame map), scaled so that `|∇F| = 1` at the frame origin (F ≈ signed distance in px there).
 fn frame_conic_to_image(theta: &[f64; 5], fr: &Frame, scale: f64) -> Conic {
     let [a, b, c, d, e] = *theta;
-    let q = Matrix3::new(
-        a,
-        0.5 * b,
-        0.5 * d,
-        0.5 * b,
-        c,
-        -0.5,
-        0.5 * d,
-        -0.5,
-        e,
-    );
+    let q = Matrix3::new(a, 0.5 * b, 0.5 * d, 0.5 * b, c, -0.5, 0.5 * d, -0.5, e);
     let [tx, ty] = fr.tangent;
     let [nx, ny] = fr.normal;
     let [cx, cy] = fr.centre;
@@ -831,7 +940,10 @@ fn line_conic_points(l: &Vector3<f64>, q: &Matrix3<f64>) -> ([[f64; 2]; 2], usiz
 /// distances; this cleans up the conditioning losses of the pencil construction.
 fn polish(p: [f64; 2], c1: &Conic, c2: &Conic) -> [f64; 2] {
     let err = |p: [f64; 2]| {
-        let (a, b) = (c1.sampson_distance(p[0], p[1]), c2.sampson_distance(p[0], p[1]));
+        let (a, b) = (
+            c1.sampson_distance(p[0], p[1]),
+            c2.sampson_distance(p[0], p[1]),
+        );
         a * a + b * b
     };
     let mut p = p;
@@ -922,7 +1034,7 @@ fn split_degenerate(d: &Matrix3<f64>) -> Option<[Vector3<f64>; 2]> {
             return None;
         }
         let g = d.column(j) / djj.sqrt();
-        return Some([g.into(), g.into()]);
+        return Some([g, g]);
     }
     if bii > 0.0 {
         return None;
@@ -949,7 +1061,7 @@ fn split_degenerate(d: &Matrix3<f64>) -> Option<[Vector3<f64>; 2]> {
 /// determinants vanish (both conics degenerate) the cubic drops degree and the conics themselves are
 /// candidates. Among the degenerate members that are real line pairs, the best-conditioned one
 /// (largest adjugate, i.e. lines furthest from coinciding) is split into its two lines, which are
-/// intersected with whichever input conic is less degenerate. The points are finally polished with
+/// intersected with the input conic of smaller weight in that member. The points are finally polished with
 /// Newton steps on both conic equations in the original coordinates. Invalid (non-finite or zero)
 /// or coincident conics give an empty vector. Internally coordinates are translated to the origin
 /// for conditioning; [`nearest_intersection`] translates to the given point instead.
@@ -998,7 +1110,7 @@ fn intersect_conics_about(c1: &Conic, c2: &Conic, origin: [f64; 2]) -> Vec<[f64;
         cands[nc] = (0.0, 1.0);
         nc += 1;
     }
-    let mut best: Option<(f64, [Vector3<f64>; 2])> = None;
+    let mut best: Option<(f64, [Vector3<f64>; 2], bool)> = None;
     for &(l, m) in &cands[..nc] {
         let d = q1 * l + q2 * m;
         let dn = d.norm();
@@ -1011,17 +1123,19 @@ fn intersect_conics_about(c1: &Conic, c2: &Conic, origin: [f64; 2]) -> Vec<[f64;
             continue;
         }
         let score = adjugate(&d).norm();
-        if best.as_ref().is_some_and(|(s, _)| *s >= score) {
+        if best.as_ref().is_some_and(|(s, ..)| *s >= score) {
             continue;
         }
         if let Some(lines) = split_degenerate(&d) {
-            best = Some((score, lines));
+            // Intersect the lines with the conic the member is least made of (for `D = C₁`, a line
+            // pair, intersecting with C₁ itself would be void).
+            best = Some((score, lines, l.abs() >= m.abs()));
         }
     }
-    let Some((_, lines)) = best else {
+    let Some((_, lines, use_q2)) = best else {
         return out;
     };
-    let qref = if k3.abs() >= k0.abs() { &q1 } else { &q2 };
+    let qref = if use_q2 { &q2 } else { &q1 };
     for l in &lines {
         let (pts, n) = line_conic_points(l, qref);
         for p in &pts[..n] {
@@ -1058,4 +1172,624 @@ pub fn nearest_intersection(a: &Curve, b: &Curve, near: [f64; 2]) -> Option<[f64
         let dq = (q[0] - near[0]).hypot(q[1] - near[1]);
         dp.total_cmp(&dq)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+
+    fn close(p: [f64; 2], q: [f64; 2], tol: f64) -> bool {
+        (p[0] - q[0]).hypot(p[1] - q[1]) <= tol
+    }
+
+    fn contains(pts: &[[f64; 2]], q: [f64; 2], tol: f64) -> bool {
+        pts.iter().any(|&p| close(p, q, tol))
+    }
+
+    fn circle(cx: f64, cy: f64, r: f64) -> Conic {
+        Conic::from_coefficients(
+            1.0,
+            0.0,
+            1.0,
+            -2.0 * cx,
+            -2.0 * cy,
+            cx * cx + cy * cy - r * r,
+        )
+    }
+
+    fn apply(h: &Matrix3<f64>, p: [f64; 2]) -> [f64; 2] {
+        let v = h * Vector3::new(p[0], p[1], 1.0);
+        [v[0] / v[2], v[1] / v[2]]
+    }
+
+    #[test]
+    fn conic_basics() {
+        let c = Conic::from_coefficients(1.0, 2.0, 3.0, 4.0, 5.0, 6.0);
+        assert_eq!(c.coefficients(), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(Conic::from_matrix(&c.matrix()), c);
+        let x = Vector3::new(0.7, -1.3, 1.0);
+        assert!((x.dot(&(c.matrix() * x)) - c.eval(0.7, -1.3)).abs() < 1e-12);
+        let h = 1e-6;
+        let g = c.gradient(0.7, -1.3);
+        assert!((g[0] - (c.eval(0.7 + h, -1.3) - c.eval(0.7 - h, -1.3)) / (2.0 * h)).abs() < 1e-6);
+        assert!((g[1] - (c.eval(0.7, -1.3 + h) - c.eval(0.7, -1.3 - h)) / (2.0 * h)).abs() < 1e-6);
+
+        let k = circle(3000.0, 2000.0, 50.0);
+        assert!((k.sampson_distance(3050.1, 2000.0) - 0.1).abs() < 1e-3);
+        assert!((k.sampson_distance(3049.9, 2000.0) + 0.1).abs() < 1e-3);
+        assert!((k.curvature(3050.0, 2000.0) - 0.02).abs() < 1e-12);
+        // Ellipse x²/a² + y²/b² = 1: curvature b/a² at (0, b).
+        let e = Conic::from_coefficients(1.0 / 25.0, 0.0, 1.0 / 4.0, 0.0, 0.0, -1.0);
+        assert!((e.curvature(0.0, 2.0) - 2.0 / 25.0).abs() < 1e-12);
+        assert_eq!(
+            Conic::from_coefficients(0.0, 0.0, 0.0, 1.0, 2.0, 3.0).sampson_distance(1.0, 1.0),
+            6.0 / 5f64.sqrt()
+        );
+        // Singular point of a line pair xy = 0.
+        let pair = Conic::from_coefficients(0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
+        assert_eq!(pair.sampson_distance(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn classification() {
+        assert_eq!(circle(3000.0, 2000.0, 10.0).kind(), ConicKind::Ellipse);
+        assert_eq!(circle(0.0, 0.0, 1000.0).kind(), ConicKind::Ellipse);
+        assert_eq!(
+            Conic::from_coefficients(1.0, 0.0, -1.0, 0.0, 0.0, -1.0).kind(),
+            ConicKind::Hyperbola
+        );
+        assert_eq!(
+            Conic::from_coefficients(1.0, 0.0, 0.0, 0.0, -1.0, 0.0).kind(),
+            ConicKind::Parabola
+        );
+        // (x − y − 1)(x + 2y + 3) far from the origin.
+        let (l1, l2) = (
+            Vector3::new(1.0, -1.0, -1001.0),
+            Vector3::new(1.0, 2.0, -5003.0),
+        );
+        let pair = Conic::from_matrix(&(l1 * l2.transpose()));
+        assert_eq!(pair.kind(), ConicKind::Degenerate);
+        assert_eq!(
+            Conic::from_coefficients(0.0, 0.0, 0.0, 1.0, 1.0, 1.0).kind(),
+            ConicKind::Degenerate
+        );
+        assert_eq!(
+            Conic::from_coefficients(f64::NAN, 0.0, 1.0, 0.0, 0.0, 1.0).kind(),
+            ConicKind::Degenerate
+        );
+    }
+
+    #[test]
+    fn homography_maps_points_onto_transformed_conic() {
+        let h = Matrix3::new(1.1, 0.2, 3000.0, -0.1, 0.9, 2000.0, 2e-4, -1e-4, 1.0);
+        let c = circle(10.0, -5.0, 80.0);
+        let t = c.transform(&h).unwrap();
+        for k in 0..12 {
+            let a = k as f64 * 0.5;
+            let p = apply(&h, [10.0 + 80.0 * a.cos(), -5.0 + 80.0 * a.sin()]);
+            assert!(t.sampson_distance(p[0], p[1]).abs() < 1e-9, "{k}");
+        }
+        assert!(c.transform(&Matrix3::zeros()).is_none());
+    }
+
+    #[test]
+    fn line_tls() {
+        let pts: Vec<[f64; 2]> = (0..20)
+            .map(|i| [3000.0 + i as f64, 2000.0 + 0.5 * i as f64])
+            .collect();
+        let l = fit_line_tls(&pts, None).unwrap();
+        for p in &pts {
+            assert!(l.signed_distance(p[0], p[1]).abs() < 1e-9);
+        }
+        let [a, b, _] = l.coefficients();
+        assert!((a.hypot(b) - 1.0).abs() < 1e-15);
+        // A zero-weight outlier is ignored; a weighted one pulls.
+        let mut with_outlier = pts.clone();
+        with_outlier.push([3005.0, 2100.0]);
+        let mut w = vec![1.0; pts.len()];
+        w.push(0.0);
+        let l = fit_line_tls(&with_outlier, Some(&w)).unwrap();
+        assert!(l.signed_distance(3005.0, 2002.5).abs() < 1e-9);
+        assert!(l.signed_distance(3005.0, 2100.0).abs() > 80.0);
+        // Signed distance of a known line.
+        let l = Line::through([0.0, 0.0], [1.0, 0.0]).unwrap();
+        assert!((l.signed_distance(5.0, 2.0).abs() - 2.0).abs() < 1e-15);
+        // Bad input.
+        assert!(fit_line_tls(&[], None).is_none());
+        assert!(fit_line_tls(&[[1.0, 1.0]], None).is_none());
+        assert!(fit_line_tls(&[[1.0, 1.0], [1.0, 1.0]], None).is_none());
+        assert!(fit_line_tls(&[[1.0, 1.0], [f64::NAN, 1.0]], None).is_none());
+        assert!(fit_line_tls(&pts, Some(&[1.0])).is_none());
+        assert!(fit_line_tls(&pts[..2], Some(&[1.0, -1.0])).is_none());
+        assert!(Line::new(0.0, 0.0, 1.0).is_none());
+    }
+
+    /// `n` points at parameters `t0..=t1` on the ellipse with semi-axes 60 and 25 px rotated by
+    /// 0.4 rad, centred at `c`.
+    fn ellipse_points(c: [f64; 2], t0: f64, t1: f64, n: usize) -> Vec<[f64; 2]> {
+        let (a, b, rot) = (60.0, 25.0, 0.4f64);
+        (0..n)
+            .map(|i| {
+                let t = t0 + (t1 - t0) * i as f64 / (n - 1) as f64;
+                let (x, y) = (a * t.cos(), b * t.sin());
+                [
+                    c[0] + x * rot.cos() - y * rot.sin(),
+                    c[1] + x * rot.sin() + y * rot.cos(),
+                ]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn ellipse_direct_fit() {
+        // Full ellipse and a 120° arc, far from the origin, noise-free: exact.
+        for (t0, t1) in [(0.0, 6.0), (0.3, 2.4)] {
+            let pts = ellipse_points([3000.0, 2000.0], t0, t1, 50);
+            let e = fit_ellipse_direct(&pts, None).unwrap();
+            assert_eq!(e.kind(), ConicKind::Ellipse);
+            let probe = ellipse_points([3000.0, 2000.0], 0.0, 6.2, 37);
+            for p in &probe {
+                assert!(e.sampson_distance(p[0], p[1]).abs() < 1e-7, "{t0}");
+            }
+        }
+        // Noisy (0.1 px) full ellipse: residuals at the noise level.
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let nz = Normal::new(0.0, 0.1).unwrap();
+        let pts: Vec<[f64; 2]> = ellipse_points([100.0, 50.0], 0.0, 6.2, 200)
+            .into_iter()
+            .map(|p| [p[0] + nz.sample(&mut rng), p[1] + nz.sample(&mut rng)])
+            .collect();
+        let e = fit_ellipse_direct(&pts, None).unwrap();
+        let truth = ellipse_points([100.0, 50.0], 0.0, 6.2, 30);
+        for p in &truth {
+            assert!(e.sampson_distance(p[0], p[1]).abs() < 0.1);
+        }
+        // Degenerate input.
+        let line: Vec<[f64; 2]> = (0..10).map(|i| [i as f64, 2.0 * i as f64]).collect();
+        assert!(fit_ellipse_direct(&line, None).is_none());
+        assert!(fit_ellipse_direct(&pts[..4], None).is_none());
+        assert!(fit_ellipse_direct(&[], None).is_none());
+    }
+
+    /// Samples of a circle arc of curvature `kappa` (straight for 0) at arc lengths
+    /// `±[gap, reach]` through the plane origin with tangent +x, seen through `h`, with isotropic
+    /// image noise. Returns the points and the image of the plane origin (the gap centre).
+    fn arc_edge(
+        kappa: f64,
+        h: &Matrix3<f64>,
+        n: usize,
+        gap: f64,
+        reach: f64,
+        noise: f64,
+        rng: &mut ChaCha8Rng,
+    ) -> (Vec<[f64; 2]>, [f64; 2]) {
+        let nz = Normal::new(0.0, noise.max(1e-300)).unwrap();
+        let pts = (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) / n as f64 * 2.0 - 1.0;
+                let s = t.signum() * (gap + (reach - gap) * t.abs());
+                let q = if kappa == 0.0 {
+                    [s, 0.0]
+                } else {
+                    [(kappa * s).sin() / kappa, (1.0 - (kappa * s).cos()) / kappa]
+                };
+                let p = apply(h, q);
+                if noise > 0.0 {
+                    [p[0] + nz.sample(rng), p[1] + nz.sample(rng)]
+                } else {
+                    p
+                }
+            })
+            .collect();
+        (pts, apply(h, [0.0, 0.0]))
+    }
+
+    /// Plane → image homographies (none, mild, strong perspective: the scale changes by up to
+    /// ±25 % across ±100 px), followed by a translation to `(x0, y0)`.
+    fn homographies(x0: f64, y0: f64) -> [Matrix3<f64>; 3] {
+        let t = Matrix3::new(1.0, 0.0, x0, 0.0, 1.0, y0, 0.0, 0.0, 1.0);
+        [
+            Matrix3::identity(),
+            Matrix3::new(0.9, -0.4, 0.0, 0.4, 0.95, 0.0, 4e-4, -2e-4, 1.0),
+            Matrix3::new(0.6, 0.7, 0.0, -0.8, 0.5, 0.0, -1.5e-3, 1e-3, 1.0),
+        ]
+        .map(|p| t * p)
+    }
+
+    #[test]
+    fn edge_curve_noise_free_passes_through_the_gap_centre() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut worst: f64 = 0.0;
+        for (x0, y0) in [(320.0, 240.0), (3000.0, 2000.0)] {
+            for h in homographies(x0, y0) {
+                for kappa in [0.0, 1e-4, 1e-3, 3e-3] {
+                    for (gap, reach) in [(10.0, 100.0), (5.0, 40.0)] {
+                        let (pts, truth) = arc_edge(kappa, &h, 200, gap, reach, 0.0, &mut rng);
+                        let fit = fit_edge_curve(&pts, None).unwrap();
+                        let err = fit.curve.distance(truth[0], truth[1]).abs();
+                        worst = worst.max(err);
+                        assert!(
+                            err < 1e-6,
+                            "κ={kappa} at ({x0},{y0}) {gap}..{reach}: {err} ({:?})",
+                            fit.model
+                        );
+                        if kappa == 0.0 {
+                            assert_eq!(fit.model, EdgeModel::Line);
+                        }
+                        assert!(fit.rms < 1e-6);
+                    }
+                }
+            }
+        }
+        eprintln!("noise-free worst gap-centre error {worst:.2e} px");
+    }
+
+    #[test]
+    fn edge_curve_with_noise() {
+        // 200 points over ±(10..100) px with isotropic noise σ: RMS error at the gap centre over
+        // 200 seeds, against the bound given. Mild perspective, near and far from the origin.
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        // (curvature, noise, bound, homography: 1 mild, 2 strong perspective)
+        let cases = [
+            (0.0, 0.1, 0.015, 1),
+            (1e-3, 0.1, 0.025, 1),
+            (2e-3, 0.1, 0.025, 1),
+            (3e-3, 0.1, 0.025, 1),
+            (1e-3, 0.1, 0.025, 2),
+            (3e-3, 0.1, 0.025, 2),
+            (0.0, 0.3, 0.04, 1),
+            (1e-3, 0.3, 0.06, 1),
+            (3e-3, 0.3, 0.06, 1),
+            (3e-3, 0.3, 0.06, 2),
+        ];
+        for (kappa, noise, bound, hk) in cases {
+            for (x0, y0) in [(300.0, 200.0), (3000.0, 2000.0)] {
+                let h = homographies(x0, y0)[hk];
+                let (mut se, mut se_ell, mut ne) = (0.0, 0.0, 0);
+                let mut counts = [0usize; 3];
+                for _ in 0..200 {
+                    let (pts, truth) = arc_edge(kappa, &h, 200, 10.0, 100.0, noise, &mut rng);
+                    let fit = fit_edge_curve(&pts, None).unwrap();
+                    let e = fit.curve.distance(truth[0], truth[1]);
+                    se += e * e;
+                    counts[fit.model as usize] += 1;
+                    assert!((fit.rms / noise - 1.0).abs() < 0.3, "rms {}", fit.rms);
+                    if let Some(el) = fit_ellipse_direct(&pts, None) {
+                        let e = el.sampson_distance(truth[0], truth[1]);
+                        se_ell += e * e;
+                        ne += 1;
+                    }
+                }
+                let rms = (se / 200.0).sqrt();
+                let rms_ell = (se_ell / ne.max(1) as f64).sqrt();
+                eprintln!(
+                    "κ={kappa} σ={noise} H{hk} at ({x0},{y0}): gap-centre RMS {rms:.4} px, \
+                     line/parabola/conic {counts:?}; direct ellipse {rms_ell:.4} px"
+                );
+                assert!(rms < bound, "κ={kappa} σ={noise}: {rms}");
+            }
+        }
+    }
+
+    #[test]
+    fn nearly_straight_noisy_edges_never_fold_back() {
+        // The fitted curve must stay a single smooth branch across the data and the gap: check that
+        // it has no second crossing of the normal line through the gap centre within a quarter of
+        // the reach.
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for seed in 0..300 {
+            let noise = [0.02, 0.1, 0.3][seed % 3];
+            let kappa = [0.0, 1e-4, 5e-4][seed / 3 % 3];
+            let h = homographies(500.0, 400.0)[seed % 3];
+            let n = rng.gen_range(40..400);
+            let reach = rng.gen_range(20.0..100.0);
+            let (pts, truth) = arc_edge(kappa, &h, n, 10.0, reach, noise, &mut rng);
+            let fit = fit_edge_curve(&pts, None).unwrap();
+            assert!(fit.curve.distance(truth[0], truth[1]).abs() < 0.3);
+            let dir = apply(&h, [1.0, 0.0]);
+            let line = Line::through(
+                truth,
+                [
+                    truth[0] - (dir[1] - truth[1]),
+                    truth[1] + (dir[0] - truth[0]),
+                ],
+            )
+            .unwrap();
+            let hits = intersect(&fit.curve, &Curve::Line(line));
+            let near = hits
+                .iter()
+                .filter(|p| close(**p, truth, 0.25 * reach))
+                .count();
+            assert_eq!(near, 1, "seed {seed}: {hits:?} {:?}", fit.model);
+        }
+    }
+
+    #[test]
+    fn edge_on_a_thin_ellipse_is_fitted_exactly() {
+        // A circle on a cylinder seen at a grazing angle: the 600 × 60 px ellipse
+        // x²/300² + (y − 30)²/30² = 1 near its flat side (κ = 30/300² = 3.3·10⁻⁴ px⁻¹), whose
+        // other side is only 60 px from the data.
+        let (a, b) = (300.0, 30.0);
+        let pts: Vec<[f64; 2]> = (0..200)
+            .map(|i| {
+                let t = (i as f64 + 0.5) / 200.0 * 2.0 - 1.0;
+                let x = t.signum() * (10.0 + 90.0 * t.abs());
+                [1000.0 + x, 700.0 + b - b * (1.0 - x * x / (a * a)).sqrt()]
+            })
+            .collect();
+        let fit = fit_edge_curve(&pts, None).unwrap();
+        assert_eq!(fit.model, EdgeModel::Conic);
+        assert!(fit.curve.distance(1000.0, 700.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn edge_curve_bad_input() {
+        assert!(fit_edge_curve(&[], None).is_none());
+        assert!(fit_edge_curve(&[[0.0, 0.0], [1.0, 1.0]], None).is_none());
+        assert!(fit_edge_curve(&[[1.0, 1.0]; 10], None).is_none());
+        assert!(fit_edge_curve(&[[0.0, 0.0], [1.0, 1.0], [f64::INFINITY, 2.0]], None).is_none());
+        let pts: Vec<[f64; 2]> = (0..10).map(|i| [i as f64, 0.0]).collect();
+        assert!(fit_edge_curve(&pts, Some(&[1.0; 3])).is_none());
+        assert!(fit_edge_curve(&pts, Some(&[0.0; 10])).is_none());
+        // Three points: a line.
+        let fit = fit_edge_curve(&pts[..3], None).unwrap();
+        assert_eq!(fit.model, EdgeModel::Line);
+        // Weights: zero-weight outliers are ignored.
+        let mut p2 = pts.clone();
+        p2.push([4.5, 30.0]);
+        let mut w = vec![1.0; 10];
+        w.push(0.0);
+        let fit = fit_edge_curve(&p2, Some(&w)).unwrap();
+        assert!(fit.curve.distance(4.5, 0.0).abs() < 1e-9);
+        assert_eq!(fit.n, 10);
+    }
+
+    #[test]
+    fn conic_intersections_with_known_answers() {
+        // 4 points.
+        let e1 = Conic::from_coefficients(0.25, 0.0, 1.0, 0.0, 0.0, -1.0);
+        let e2 = Conic::from_coefficients(1.0, 0.0, 0.25, 0.0, 0.0, -1.0);
+        let pts = intersect_conics(&e1, &e2);
+        let s = 2.0 / 5f64.sqrt();
+        assert_eq!(pts.len(), 4, "{pts:?}");
+        for q in [[s, s], [-s, s], [s, -s], [-s, -s]] {
+            assert!(contains(&pts, q, 1e-12));
+        }
+        // 2 points.
+        let pts = intersect_conics(&circle(0.0, 0.0, 1.0), &circle(1.0, 0.0, 1.0));
+        assert_eq!(pts.len(), 2, "{pts:?}");
+        assert!(contains(&pts, [0.5, 0.75f64.sqrt()], 1e-12));
+        assert!(contains(&pts, [0.5, -(0.75f64.sqrt())], 1e-12));
+        // 2 points of two ellipses.
+        let e3 =
+            Conic::from_coefficients(1.0 / 9.0, 0.0, 1.0, -2.0 / 9.0 * 2.0, 0.0, 4.0 / 9.0 - 1.0);
+        let pts = intersect_conics(&e1, &e3);
+        assert_eq!(pts.len(), 2, "{pts:?}");
+        for p in &pts {
+            assert!(e1.eval(p[0], p[1]).abs() < 1e-12 && e3.eval(p[0], p[1]).abs() < 1e-12);
+        }
+        // 0 points: disjoint, and nested.
+        assert!(intersect_conics(&circle(0.0, 0.0, 1.0), &circle(5.0, 0.0, 1.0)).is_empty());
+        assert!(intersect_conics(&circle(0.0, 0.0, 1.0), &circle(0.0, 0.0, 2.0)).is_empty());
+        assert!(intersect_conics(
+            &e1,
+            &Conic::from_coefficients(0.5, 0.0, 2.0, 0.0, 0.0, -1.0)
+        )
+        .is_empty());
+        // Tangent circles: the tangency point.
+        let pts = intersect_conics(&circle(0.0, 0.0, 1.0), &circle(2.0, 0.0, 1.0));
+        assert!(
+            !pts.is_empty() && pts.iter().all(|p| close(*p, [1.0, 0.0], 1e-6)),
+            "{pts:?}"
+        );
+        // Far from the origin. Written in image coordinates these circles have f ≈ 1.3·10⁷, so
+        // evaluating them cancels 7 digits: 10⁻⁹ is the representation's limit, not the solver's.
+        let pts = intersect_conics(&circle(3000.0, 2000.0, 1.0), &circle(3001.0, 2000.0, 1.0));
+        assert_eq!(pts.len(), 2);
+        assert!(
+            contains(&pts, [3000.5, 2000.0 + 0.75f64.sqrt()], 1e-8),
+            "{pts:?}"
+        );
+    }
+
+    #[test]
+    fn line_conic_and_line_line() {
+        let c = circle(0.0, 0.0, 5.0);
+        let pts = intersect_line_conic(&Line::new(0.0, 1.0, -3.0).unwrap(), &c);
+        assert_eq!(pts.len(), 2);
+        assert!(contains(&pts, [4.0, 3.0], 1e-12) && contains(&pts, [-4.0, 3.0], 1e-12));
+        let pts = intersect_line_conic(&Line::new(0.0, 1.0, -5.0).unwrap(), &c);
+        assert_eq!(pts.len(), 1);
+        assert!(close(pts[0], [0.0, 5.0], 1e-9));
+        assert!(intersect_line_conic(&Line::new(0.0, 1.0, -6.0).unwrap(), &c).is_empty());
+        // Nearly tangent: no NaN, points near the tangency.
+        for off in [-1e-9, 1e-13, -1e-13] {
+            let pts = intersect_line_conic(&Line::new(0.0, 1.0, -(5.0 + off)).unwrap(), &c);
+            assert!(
+                pts.iter().all(|p| close(*p, [0.0, 5.0], 2e-4)),
+                "{off}: {pts:?}"
+            );
+            assert!(off > 0.0 || !pts.is_empty());
+        }
+        // Lines.
+        let l1 = Line::through([3000.0, 2000.0], [3001.0, 2002.0]).unwrap();
+        let l2 = Line::through([3000.0, 2000.0], [2999.0, 2003.0]).unwrap();
+        assert!(close(
+            intersect_lines(&l1, &l2).unwrap(),
+            [3000.0, 2000.0],
+            1e-9
+        ));
+        assert!(intersect_lines(&l1, &l1).is_none());
+        let pts = intersect(&Curve::Line(l1), &Curve::Conic(circle(3000.0, 2000.0, 1.0)));
+        assert_eq!(pts.len(), 2);
+    }
+
+    /// Circle of radius `r` through `p` with unit tangent angle `t`, stretched by `s` along the
+    /// tangent about `p`: a flat ellipse through `p` with the same tangent there.
+    fn flat_ellipse(p: [f64; 2], t: f64, r: f64, s: f64) -> Conic {
+        let (tx, ty) = (t.cos(), t.sin());
+        // In the frame (u along t, v along the normal) centred at p: u²/s² + (v − r)² = r².
+        let local = Conic::from_coefficients(1.0 / (s * s), 0.0, 1.0, 0.0, -2.0 * r, 0.0);
+        // Point homography frame → image.
+        let h = Matrix3::new(tx, -ty, p[0], ty, tx, p[1], 0.0, 0.0, 1.0);
+        local.transform(&h).unwrap()
+    }
+
+    #[test]
+    fn nearly_straight_conics() {
+        for p in [[10.0, 20.0], [3000.0, 2000.0]] {
+            for (angle, r1, r2) in [
+                (std::f64::consts::FRAC_PI_2, 1000.0, 3000.0),
+                (std::f64::consts::FRAC_PI_6, 400.0, -2000.0),
+                (std::f64::consts::FRAC_PI_6, 1e6, 1e5),
+            ] {
+                let c1 = flat_ellipse(p, 0.2, r1, 3.0);
+                let c2 = flat_ellipse(p, 0.2 + angle, r2, 2.0);
+                let got = nearest_intersection(
+                    &Curve::Conic(c1),
+                    &Curve::Conic(c2),
+                    [p[0] + 0.7, p[1] - 0.4],
+                )
+                .unwrap();
+                assert!(close(got, p, 1e-9), "{p:?} {angle}: {got:?}");
+                let all = intersect_conics(&c1, &c2);
+                assert!(contains(&all, p, 1e-9), "{p:?} {angle}: {all:?}");
+            }
+        }
+        // Nearly tangent flat curves (crossing at 1e-4 rad): still a finite answer near the truth.
+        let p = [3000.0, 2000.0];
+        let c1 = flat_ellipse(p, 0.2, 1000.0, 3.0);
+        let c2 = flat_ellipse(p, 0.2 + 1e-4, 1000.0, 3.0);
+        let got = nearest_intersection(&Curve::Conic(c1), &Curve::Conic(c2), p).unwrap();
+        assert!(close(got, p, 1e-3), "{got:?}");
+    }
+
+    #[test]
+    fn degenerate_intersection_input() {
+        let c = circle(0.0, 0.0, 1.0);
+        let zero = Conic::from_coefficients(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let nan = Conic::from_coefficients(f64::NAN, 0.0, 1.0, 0.0, 0.0, -1.0);
+        assert!(intersect_conics(&c, &zero).is_empty());
+        assert!(intersect_conics(&nan, &c).is_empty());
+        assert!(intersect_conics(&c, &c)
+            .iter()
+            .all(|p| p[0].is_finite() && p[1].is_finite()));
+        let scaled = Conic::from_coefficients(3.0, 0.0, 3.0, 0.0, 0.0, -3.0);
+        assert!(intersect_conics(&c, &scaled)
+            .iter()
+            .all(|p| p[0].is_finite()));
+        assert!(intersect_line_conic(&Line::new(1.0, 0.0, 0.0).unwrap(), &zero).is_empty());
+        assert!(nearest_intersection(&Curve::Conic(c), &Curve::Conic(nan), [0.0, 0.0]).is_none());
+        // Two line pairs: xy = 0 and (x − 1)(y − 1) = 0 meet at (0, 1) and (1, 0).
+        let a = Conic::from_coefficients(0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
+        let b = Conic::from_coefficients(0.0, 1.0, 0.0, -1.0, -1.0, 1.0);
+        let pts = intersect_conics(&a, &b);
+        assert!(
+            contains(&pts, [0.0, 1.0], 1e-9) && contains(&pts, [1.0, 0.0], 1e-9),
+            "{pts:?}"
+        );
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(500))]
+        #[test]
+        fn random_conics_through_a_common_point(
+            q1 in proptest::array::uniform5(-1.0f64..1.0),
+            q2 in proptest::array::uniform5(-1.0f64..1.0),
+            px in -10.0f64..10.0,
+            py in -10.0f64..10.0,
+        ) {
+            let through = |q: [f64; 5]| {
+                let c = Conic::from_coefficients(q[0], q[1], q[2], q[3], q[4], 0.0);
+                Conic::from_coefficients(q[0], q[1], q[2], q[3], q[4], -c.eval(px, py))
+            };
+            let (c1, c2) = (through(q1), through(q2));
+            let (g1, g2) = (c1.gradient(px, py), c2.gradient(px, py));
+            let (n1, n2) = (g1[0].hypot(g1[1]), g2[0].hypot(g2[1]));
+            // Well-posed instances only: the curves cross transversally at the point.
+            prop_assume!(n1 > 0.1 && n2 > 0.1);
+            prop_assume!((g1[0] * g2[1] - g1[1] * g2[0]).abs() > 0.1 * n1 * n2);
+            let pts = intersect_conics(&c1, &c2);
+            prop_assert!(contains(&pts, [px, py], 1e-6), "{:?}", pts);
+            for p in &pts {
+                prop_assert!(c1.sampson_distance(p[0], p[1]).abs() < 1e-6);
+                prop_assert!(c2.sampson_distance(p[0], p[1]).abs() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn corner_from_two_fitted_edges() {
+        // Two curved edges through the same plane point (the corner), crossing at 90° in the plane,
+        // under mild perspective; noise-free the corner is exact, at σ = 0.1 px it is close.
+        let h = homographies(1500.0, 1000.0)[1];
+        let rot = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut se = 0.0;
+        for (i, noise) in [0.0, 0.1, 0.1, 0.1, 0.1, 0.1].into_iter().enumerate() {
+            let (a, truth) = arc_edge(2e-3, &h, 200, 10.0, 100.0, noise, &mut rng);
+            let (b, _) = arc_edge(-1e-3, &(h * rot), 200, 10.0, 100.0, noise, &mut rng);
+            let fa = fit_edge_curve(&a, None).unwrap();
+            let fb = fit_edge_curve(&b, None).unwrap();
+            let near = [truth[0] + 0.8, truth[1] - 0.6];
+            let p = nearest_intersection(&fa.curve, &fb.curve, near).unwrap();
+            let err = (p[0] - truth[0]).hypot(p[1] - truth[1]);
+            if i == 0 {
+                assert!(err < 1e-6, "noise-free corner error {err}");
+            } else {
+                se += err * err;
+            }
+        }
+        assert!((se / 5.0).sqrt() < 0.05, "{se}");
+    }
+
+    /// On-CPU time of this thread in ns (Linux schedstat), so that the measurement does not count
+    /// time spent waiting for a core on a loaded machine; wall time elsewhere.
+    fn cpu_ns() -> Option<u64> {
+        let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+        s.split_whitespace().next()?.parse().ok()
+    }
+
+    #[test]
+    fn timing_fit_and_intersect_400_points() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let h = homographies(1500.0, 1000.0)[1];
+        let rot = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let (a, truth) = arc_edge(2e-3, &h, 400, 10.0, 100.0, 0.1, &mut rng);
+        let (b, _) = arc_edge(-1e-3, &(h * rot), 400, 10.0, 100.0, 0.1, &mut rng);
+        let fa = fit_edge_curve(&a, None).unwrap();
+        let fb = fit_edge_curve(&b, None).unwrap();
+        // schedstat advances at scheduler ticks: run each measurement for ~50 ms.
+        let time = |reps: u32, f: &dyn Fn() -> f64| {
+            let (w0, c0) = (std::time::Instant::now(), cpu_ns());
+            let mut acc = 0.0;
+            for _ in 0..reps {
+                acc += f();
+            }
+            let wall = w0.elapsed().as_secs_f64() * 1e9;
+            let ns = match (c0, cpu_ns()) {
+                (Some(c0), Some(c1)) => (c1 - c0) as f64,
+                _ => wall,
+            };
+            std::hint::black_box(acc);
+            ns / reps as f64 / 1e3
+        };
+        let t_a = time(3000, &|| {
+            fit_edge_curve(std::hint::black_box(&a), None).unwrap().rms
+        });
+        let t_b = time(3000, &|| {
+            fit_edge_curve(std::hint::black_box(&b), None).unwrap().rms
+        });
+        let t_x = time(30000, &|| {
+            nearest_intersection(std::hint::black_box(&fa.curve), &fb.curve, truth).unwrap()[0]
+        });
+        eprintln!(
+            "400-point edge fit: {t_a:.1} µs ({:?}), {t_b:.1} µs ({:?}); intersection {t_x:.2} µs",
+            fa.model, fb.model
+        );
+    }
 }
