@@ -129,7 +129,11 @@ fn horizontal_chunk<const L: usize, const FUSED: bool>(
         }
     }
     // Element-wise stores: `copy_from_slice` here becomes a `memcpy` call per chunk.
-    let (h0, h1, h2) = (&mut h0[x0..x0 + L], &mut h1[x0..x0 + L], &mut h2[x0..x0 + L]);
+    let (h0, h1, h2) = (
+        &mut h0[x0..x0 + L],
+        &mut h1[x0..x0 + L],
+        &mut h2[x0..x0 + L],
+    );
     for i in 0..L {
         (h0[i], h1[i], h2[i]) = (a0[i], a1[i], a2[i]);
     }
@@ -137,7 +141,13 @@ fn horizontal_chunk<const L: usize, const FUSED: bool>(
 
 /// Horizontal pass of image row `y` into ring slot `slot` of `s`.
 #[inline(always)]
-fn horizontal_row<const FUSED: bool>(image: &GrayImage, k: &Kernels, y: usize, slot: usize, s: &mut BandScratch) {
+fn horizontal_row<const FUSED: bool>(
+    image: &GrayImage,
+    k: &Kernels,
+    y: usize,
+    slot: usize,
+    s: &mut BandScratch,
+) {
     let w = image.width();
     let r = k.radius();
     let row = image.row(y);
@@ -216,7 +226,12 @@ unsafe fn score_band_avx2(image: &GrayImage, k: &Kernels, y0: usize, out: &mut [
 }
 
 #[inline(always)]
-fn score_band_generic<const FUSED: bool>(image: &GrayImage, k: &Kernels, y0: usize, out: &mut [f32]) {
+fn score_band_generic<const FUSED: bool>(
+    image: &GrayImage,
+    k: &Kernels,
+    y0: usize,
+    out: &mut [f32],
+) {
     let (w, h) = (image.width(), image.height());
     let r = k.radius();
     let ring = 2 * r + 1;
@@ -523,7 +538,13 @@ mod tests {
     fn nms_keeps_isolated_maxima_and_respects_radius_and_margin() {
         let (w, h) = (30, 30);
         let mut data = vec![0f32; w * h];
-        let peaks = [(5, 5, 3.0), (7, 6, 2.0), (20, 8, 1.0), (1, 15, 9.0), (15, 25, 4.0)];
+        let peaks = [
+            (5, 5, 3.0),
+            (7, 6, 2.0),
+            (20, 8, 1.0),
+            (1, 15, 9.0),
+            (15, 25, 4.0),
+        ];
         for &(x, y, v) in &peaks {
             data[y * w + x] = v;
         }
