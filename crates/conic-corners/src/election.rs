@@ -106,7 +106,7 @@ pub fn saddle_orientations(alpha: f64, beta: f64, gamma: f64) -> Option<[f64; 2]
     let m = 0.5 * (alpha + gamma);
     let (a, b) = (0.5 * (alpha - gamma), 0.5 * beta);
     let r = a.hypot(b);
-    if !(r > 0.0) || m.abs() >= r {
+    if r.is_nan() || r <= 0.0 || m.abs() >= r {
         return None;
     }
     let psi = b.atan2(a);
@@ -127,6 +127,9 @@ const STEP: f64 = PI / TEMPLATE_STEPS as f64;
 /// Width (pixels) of the soft step across each template edge, `tanh(d / EDGE_SOFTNESS)` with `d` the
 /// signed distance to the edge line: a mild blur, as real corners are never sharp.
 const EDGE_SOFTNESS: f64 = 1.0;
+/// The contrast rule of [`elect`] takes the median amplitude of this many highest-amplitude
+/// corners as the reference.
+const CONTRAST_REFERENCE_COUNT: usize = 16;
 /// Most hill-climbing moves through the bank from the template chosen by the surface fit. A move
 /// is 5° on either angle; the fit can be ~25° off on oblique corners (see the tests).
 const MAX_CLIMB: usize = 8;
@@ -248,6 +251,12 @@ pub struct ElectionParams {
     /// corner half a pixel off the candidate pixel); a candidate beside a line or stroke, or on a
     /// T- or L-junction, is not.
     pub min_symmetry: f64,
+    /// Smallest amplitude of a corner (the gain of its template fitted to the patch, i.e. its
+    /// contrast) as a fraction of a typical board corner's, the median of the 16 highest among
+    /// the corners that pass the score rule. Printing halftones and paper texture inside the
+    /// squares, and thin pen lines crossing an edge, can match a template well at a small fraction
+    /// of the board's contrast.
+    pub min_contrast_rel: f64,
 }
 
 impl Default for ElectionParams {
@@ -260,18 +269,19 @@ impl Default for ElectionParams {
             min_edge_angle: 30f64.to_radians(),
             max_centre_residual: 0.2,
             min_symmetry: 0.6,
+            min_contrast_rel: 0.3,
         }
     }
 }
 
 /// Scores one candidate: the template picked by the surface fit, improved by hill-climbing
 /// through neighbouring bank entries (the fit is biased towards 90° on oblique corners). Returns
-/// the best `|NCC|` and its template orientations.
+/// the best `|NCC|`, the corner's amplitude (intensity units) and the template orientations.
 fn score_candidate(
     image: &GrayImage,
     c: &Candidate,
     params: &ElectionParams,
-) -> Option<(f32, [f64; 2])> {
+) -> Option<(f32, f32, [f64; 2])> {
     let (x, y) = (c.x as f64, c.y as f64);
     let angles = edge_orientations(image, x, y, params.fit_half)?;
     let (patch, norm) = centred_patch(image, c.x, c.y)?;
@@ -313,8 +323,13 @@ fn score_candidate(
         .sum::<f32>()
         / (norm * norm);
     let symmetric = symmetry as f64 >= params.min_symmetry;
-    (symmetric && centre_is_consistent(&patch, e, d, params.max_centre_residual))
-        .then_some((best, wrap_pair(template_angles(e, d))))
+    // The amplitude of the corner: the least-squares gain of the unit-norm template.
+    let amplitude = best * norm;
+    (symmetric && centre_is_consistent(&patch, e, d, params.max_centre_residual)).then_some((
+        best,
+        amplitude,
+        wrap_pair(template_angles(e, d)),
+    ))
 }
 
 /// Whether the 3 × 3 centre of a centred patch matches the template `(e, d)` scaled to the patch.
@@ -355,26 +370,38 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// narrow-wedge template matches too, it is the darkest or brightest part), and the patch must be
 /// point-symmetric about the candidate (`min_symmetry`). A candidate is
 /// elected when its score is at least `max(best − t_correlation, min_score)`, `best` being the
-/// highest score in the image; elected corners closer than `min_distance` are merged (the best
-/// one stays). Returns corners strongest first, at their integer pixel positions; `angles` are the
+/// highest score in the image, and its amplitude (contrast) is at least `min_contrast_rel` times
+/// that of a typical strong corner; elected corners closer than `min_distance` are merged (the
+/// best one stays). Returns corners strongest first, at their integer pixel positions; `angles` are the
 /// orientations of the winning template (multiples of 2.5°, wrapped to `[0, π)`).
 /// Candidates within 7 px of the border (the template would leave the image) are dropped.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
-    let mut scored: Vec<Corner> = candidates
+    let mut scored: Vec<(Corner, f32)> = candidates
         .par_iter()
         .filter_map(|c| {
-            let (score, angles) = score_candidate(image, c, params)?;
-            Some(Corner {
+            let (score, amplitude, angles) = score_candidate(image, c, params)?;
+            let corner = Corner {
                 x: c.x as f64,
                 y: c.y as f64,
                 angles,
                 score: score as f64,
-            })
+            };
+            Some((corner, amplitude))
         })
         .collect();
-    let best = scored.iter().map(|c| c.score).fold(0.0, f64::max);
+    let best = scored.iter().map(|c| c.0.score).fold(0.0, f64::max);
     let threshold = (best - params.t_correlation).max(params.min_score);
-    scored.retain(|c| c.score >= threshold);
+    scored.retain(|c| c.0.score >= threshold);
+    // Contrast rule: the median amplitude of the strongest few is a typical board corner.
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let top = &scored[..scored.len().min(CONTRAST_REFERENCE_COUNT)];
+    let reference = top.get(top.len() / 2).map_or(0.0, |c| c.1) as f64;
+    let min_amplitude = params.min_contrast_rel * reference;
+    let mut scored: Vec<Corner> = scored
+        .into_iter()
+        .filter(|c| c.1 as f64 >= min_amplitude)
+        .map(|c| c.0)
+        .collect();
     scored.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.y.total_cmp(&b.y)));
     deduplicate(scored, params.min_distance)
 }
@@ -382,7 +409,7 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
 /// Greedy merge of corners (sorted best first) closer than `radius`, with a hash grid of cell
 /// `radius` so that each corner is compared with its 3 × 3 cells only.
 fn deduplicate(sorted: Vec<Corner>, radius: f64) -> Vec<Corner> {
-    if !(radius > 0.0) {
+    if radius.is_nan() || radius <= 0.0 {
         return sorted;
     }
     let cell = |v: f64| (v / radius).floor() as i64;
@@ -767,6 +794,7 @@ mod tests {
             min_edge_angle: f64::NAN,
             max_centre_residual: f64::NAN,
             min_symmetry: f64::NAN,
+            min_contrast_rel: f64::NAN,
         };
         assert!(elect(&img, &cands, &silly).is_empty());
     }

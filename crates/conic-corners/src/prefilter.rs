@@ -343,7 +343,7 @@ impl Default for PrefilterParams {
             nms_radius: 3,
             nms_tau: 2,
             expected_corners: None,
-            min_score_rel: 0.01,
+            min_score_rel: 0.05,
             max_candidates: 20_000,
         }
     }
@@ -374,7 +374,7 @@ pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Ve
                     }
                 }
             }
-            if !(mv > 0.0) {
+            if mv.is_nan() || mv <= 0.0 {
                 continue;
             }
             let (x0, x1) = (mx.saturating_sub(n).max(margin), (mx + n + 1).min(x_end));
