@@ -1,8 +1,14 @@
 //! Final election (paper III-B): the two edge orientations of a candidate from a quadratic surface
-//! fit (eq. 3–4), the matching template from a bank built once, and the NCC score (eq. 5).
+//! fit (eq. 3–4), the matching template from a bank built once, and the NCC score (eq. 5); plus
+//! [`find_corners`], the whole pixel-level detector (pre-filter then election).
+//!
+//! Positions are image coordinates (x right, y down, pixel centres at integers).
 
+use crate::prefilter::{prefilter, Candidate, PrefilterParams};
 use crate::GrayImage;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+use std::f64::consts::PI;
 use std::sync::OnceLock;
 
 /// A corner found at pixel level, with the orientations of its two edges.
@@ -100,7 +106,7 @@ pub fn saddle_orientations(alpha: f64, beta: f64, gamma: f64) -> Option<[f64; 2]
     let m = 0.5 * (alpha + gamma);
     let (a, b) = (0.5 * (alpha - gamma), 0.5 * beta);
     let r = a.hypot(b);
-    if !(r > 0.0) || m.abs() >= r {
+    if r.is_nan() || r <= 0.0 || m.abs() >= r {
         return None;
     }
     let psi = b.atan2(a);
@@ -110,10 +116,337 @@ pub fn saddle_orientations(alpha: f64, beta: f64, gamma: f64) -> Option<[f64; 2]
     Some(if t1 <= t2 { [t1, t2] } else { [t2, t1] })
 }
 
+/// Half-size of the templates: they are `(2·7+1)² = 15 × 15` pixels (paper: `w = h = 15`).
+pub const TEMPLATE_HALF: usize = 7;
+const TEMPLATE_SIDE: usize = 2 * TEMPLATE_HALF + 1;
+const TEMPLATE_LEN: usize = TEMPLATE_SIDE * TEMPLATE_SIDE;
+/// Steps of the template bank along each of its two angles (paper Fig. 3: 36 × 36 templates).
+pub const TEMPLATE_STEPS: usize = 36;
+/// Angular step of the bank, radians (5°): both angles span `[0, π)`.
+const STEP: f64 = PI / TEMPLATE_STEPS as f64;
+/// Width (pixels) of the soft step across each template edge, `tanh(d / EDGE_SOFTNESS)` with `d` the
+/// signed distance to the edge line: a mild blur, as real corners are never sharp.
+const EDGE_SOFTNESS: f64 = 1.0;
+/// The contrast rule of [`elect`] takes the median amplitude of this many highest-amplitude
+/// corners as the reference.
+const CONTRAST_REFERENCE_COUNT: usize = 16;
+/// Most hill-climbing moves through the bank from the template chosen by the surface fit. A move
+/// is 5° on either angle; the fit can be ~25° off on oblique corners (see the tests).
+const MAX_CLIMB: usize = 8;
+
+/// Zero-mean, unit-norm 15 × 15 templates, row-major, `bank[e · 36 + d]` for edge-angle bin `e`
+/// and direction bin `d` (see [`template_angles`]).
+fn template_bank() -> &'static [[f32; TEMPLATE_LEN]] {
+    static BANK: OnceLock<Vec<[f32; TEMPLATE_LEN]>> = OnceLock::new();
+    BANK.get_or_init(|| {
+        let mut bank = Vec::with_capacity(TEMPLATE_STEPS * TEMPLATE_STEPS);
+        for e in 0..TEMPLATE_STEPS {
+            for d in 0..TEMPLATE_STEPS {
+                let [t1, t2] = template_angles(e, d);
+                let mut t = [0f64; TEMPLATE_LEN];
+                for (i, v) in t.iter_mut().enumerate() {
+                    let x = (i % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+                    let y = (i / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+                    let d1 = x * t1.sin() - y * t1.cos();
+                    let d2 = x * t2.sin() - y * t2.cos();
+                    *v = (d1 / EDGE_SOFTNESS).tanh() * (d2 / EDGE_SOFTNESS).tanh();
+                }
+                let mean = t.iter().sum::<f64>() / TEMPLATE_LEN as f64;
+                let norm = t.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+                bank.push(t.map(|v| ((v - mean) / norm) as f32));
+            }
+        }
+        bank
+    })
+}
+
+/// Edge orientations `[θ₁, θ₂]` (radians, `θ₁ < θ₂`, not wrapped) of bank entry `(e, d)`: the
+/// edge angle `θ₂ − θ₁ = (e + ½)·5°` and the bisector direction `(θ₁ + θ₂)/2 = d·5°`. The bin
+/// centres avoid the degenerate edge angles 0 and 180°.
+pub fn template_angles(e: usize, d: usize) -> [f64; 2] {
+    let spread = (e as f64 + 0.5) * STEP;
+    let dir = d as f64 * STEP;
+    [dir - 0.5 * spread, dir + 0.5 * spread]
+}
+
+/// The bank entry `(e, d)` nearest to edge orientations `angles` (radians in `[0, π)`, as
+/// returned by [`edge_orientations`]).
+pub fn template_index(angles: [f64; 2]) -> (usize, usize) {
+    let (a, b) = (angles[0].min(angles[1]), angles[0].max(angles[1]));
+    let spread = (b - a).clamp(0.0, PI);
+    let e = ((spread / STEP).floor() as usize).min(TEMPLATE_STEPS - 1);
+    let d = ((0.5 * (a + b) / STEP).round() as usize) % TEMPLATE_STEPS;
+    (e, d)
+}
+
+/// Wraps orientations to `[0, π)` and sorts them.
+fn wrap_pair([a, b]: [f64; 2]) -> [f64; 2] {
+    let (a, b) = (a.rem_euclid(PI), b.rem_euclid(PI));
+    if a <= b {
+        [a, b]
+    } else {
+        [b, a]
+    }
+}
+
+/// The 15 × 15 patch centred on pixel `(x, y)`, mean removed, and its norm; `None` if it leaves the
+/// image or is flat.
+fn centred_patch(image: &GrayImage, x: usize, y: usize) -> Option<([f32; TEMPLATE_LEN], f32)> {
+    let h = TEMPLATE_HALF;
+    if x < h || y < h || x + h >= image.width() || y + h >= image.height() {
+        return None;
+    }
+    let mut p = [0f32; TEMPLATE_LEN];
+    for (r, dst) in p.chunks_exact_mut(TEMPLATE_SIDE).enumerate() {
+        dst.copy_from_slice(&image.row(y - h + r)[x - h..=x + h]);
+    }
+    let mean = p.iter().sum::<f32>() / TEMPLATE_LEN as f32;
+    let mut norm2 = 0f32;
+    for v in p.iter_mut() {
+        *v -= mean;
+        norm2 += *v * *v;
+    }
+    // Relative to the mean, so that a constant patch with rounding noise is still "flat".
+    let norm = norm2.sqrt();
+    (norm > 1e-4 * (1.0 + mean.abs()) * TEMPLATE_SIDE as f32).then_some((p, norm))
+}
+
+/// `|NCC|` (eq. 5) of a centred patch with bank entry `(e, d)`; the sign only tells which pair of
+/// opposite sectors is bright, and checkerboards have both kinds of corner.
+fn ncc(patch: &[f32; TEMPLATE_LEN], norm: f32, e: usize, d: usize) -> f32 {
+    let t = &template_bank()[e * TEMPLATE_STEPS + d];
+    let dot: f32 = patch.iter().zip(t).map(|(a, b)| a * b).sum();
+    (dot / norm).abs()
+}
+
+/// Parameters of [`elect`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElectionParams {
+    /// Half-size of the window of the quadratic surface fit ([`edge_orientations`]): the paper's
+    /// `n = 7` is `fit_half = 3`. Larger windows are steadier under noise but see neighbouring
+    /// corners on small squares.
+    pub fit_half: usize,
+    /// `T_correlation` (paper: 0.25): a candidate is kept only if its score is within this of the
+    /// best score in the image.
+    pub t_correlation: f64,
+    /// Absolute floor on the score, so that an image without any board yields nothing. An ideal
+    /// L-shaped corner (one bright quadrant out of four, as at the outer corners of a board or of
+    /// any dark rectangle) scores ≈ 0.58 against the X-shaped templates; X-junctions of a real
+    /// board score 0.8–0.98.
+    pub min_score: f64,
+    /// Two elected corners closer than this (pixels) are the same corner: the better scoring one
+    /// is kept.
+    pub min_distance: f64,
+    /// Smallest edge angle (radians) between the two edges of a corner; templates with an edge
+    /// angle below it or above `π − min_edge_angle` are never used. Nearly parallel edges make the
+    /// template a thin line, which matches pen strokes and pinstripes better than any corner; a
+    /// board seen at up to ~60° obliquity keeps its corner angles above 30°.
+    pub min_edge_angle: f64,
+    /// Largest misfit of the 3 × 3 centre of the patch to the elected template, as a fraction of
+    /// the corner's contrast (see the election rule in [`elect`]). Rejects thin lines and pen
+    /// strokes, whose centre is at one extreme of the intensity where a corner is mid-grey.
+    pub max_centre_residual: f64,
+    /// Smallest normalized correlation of the patch with itself rotated by 180° about the
+    /// candidate. An X-junction is point-symmetric (opposite sectors alike; ≥ 0.85 even with the
+    /// corner half a pixel off the candidate pixel); a candidate beside a line or stroke, or on a
+    /// T- or L-junction, is not.
+    pub min_symmetry: f64,
+    /// Smallest amplitude of a corner (the gain of its template fitted to the patch, i.e. its
+    /// contrast) as a fraction of a typical board corner's, the median of the 16 highest among
+    /// the corners that pass the score rule. Printing halftones and paper texture inside the
+    /// squares, and thin pen lines crossing an edge, can match a template well at a small fraction
+    /// of the board's contrast.
+    pub min_contrast_rel: f64,
+}
+
+impl Default for ElectionParams {
+    fn default() -> Self {
+        Self {
+            fit_half: 3,
+            t_correlation: 0.25,
+            min_score: 0.65,
+            min_distance: 5.0,
+            min_edge_angle: 30f64.to_radians(),
+            max_centre_residual: 0.2,
+            min_symmetry: 0.6,
+            min_contrast_rel: 0.3,
+        }
+    }
+}
+
+/// Scores one candidate: the template picked by the surface fit, improved by hill-climbing
+/// through neighbouring bank entries (the fit is biased towards 90° on oblique corners). Returns
+/// the best `|NCC|`, the corner's amplitude (intensity units) and the template orientations.
+fn score_candidate(
+    image: &GrayImage,
+    c: &Candidate,
+    params: &ElectionParams,
+) -> Option<(f32, f32, [f64; 2])> {
+    let (x, y) = (c.x as f64, c.y as f64);
+    let angles = edge_orientations(image, x, y, params.fit_half)?;
+    let (patch, norm) = centred_patch(image, c.x, c.y)?;
+    // Edge-angle bins whose centre (e + ½)·5° lies in [min_edge_angle, π − min_edge_angle].
+    let min_angle = if params.min_edge_angle.is_finite() {
+        params.min_edge_angle.clamp(0.0, 0.5 * PI)
+    } else {
+        0.0
+    };
+    let e_lo = ((min_angle / STEP - 0.5).ceil().max(0.0) as usize).min(TEMPLATE_STEPS / 2 - 1);
+    let e_hi = TEMPLATE_STEPS - 1 - e_lo;
+    let (e0, mut d) = template_index(angles);
+    let mut e = e0.clamp(e_lo, e_hi);
+    let mut best = ncc(&patch, norm, e, d);
+    for _ in 0..MAX_CLIMB {
+        let mut step = None;
+        for de in -1isize..=1 {
+            for dd in -1isize..=1 {
+                let ne = e as isize + de;
+                if (de, dd) == (0, 0) || ne < e_lo as isize || ne > e_hi as isize {
+                    continue;
+                }
+                let nd = (d as isize + dd).rem_euclid(TEMPLATE_STEPS as isize) as usize;
+                let s = ncc(&patch, norm, ne as usize, nd);
+                if s > best {
+                    best = s;
+                    step = Some((ne as usize, nd));
+                }
+            }
+        }
+        match step {
+            Some((ne, nd)) => (e, d) = (ne, nd),
+            None => break,
+        }
+    }
+    // NCC of the patch with itself rotated by 180° about the candidate (same pixels, same mean).
+    let symmetry = (0..TEMPLATE_LEN)
+        .map(|i| patch[i] * patch[TEMPLATE_LEN - 1 - i])
+        .sum::<f32>()
+        / (norm * norm);
+    let symmetric = symmetry as f64 >= params.min_symmetry;
+    // The amplitude of the corner: the least-squares gain of the unit-norm template.
+    let amplitude = best * norm;
+    (symmetric && centre_is_consistent(&patch, e, d, params.max_centre_residual)).then_some((
+        best,
+        amplitude,
+        wrap_pair(template_angles(e, d)),
+    ))
+}
+
+/// Whether the 3 × 3 centre of a centred patch matches the template `(e, d)` scaled to the patch.
+///
+/// With `b = Σ patch·T` the least-squares gain of the zero-mean unit-norm template `T`, the residual
+/// `|mean₃ₓ₃(patch) − b·mean₃ₓ₃(T)|` is compared with the corner's contrast `|b|·(max T − min T)`.
+/// At an X-junction the centre is the balanced mix of the sectors and the residual is small; a thin
+/// line or a stroke, which a narrow-wedge template also matches, has its darkest (or brightest)
+/// pixels right at the centre, a residual near half the contrast.
+fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel: f64) -> bool {
+    let t = &template_bank()[e * TEMPLATE_STEPS + d];
+    let b: f32 = patch.iter().zip(t).map(|(a, b)| a * b).sum();
+    let (lo, hi) = t
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
+    let h = TEMPLATE_HALF;
+    let centre = |img: &[f32; TEMPLATE_LEN]| -> f32 {
+        (h - 1..=h + 1)
+            .flat_map(|r| (h - 1..=h + 1).map(move |c| r * TEMPLATE_SIDE + c))
+            .map(|i| img[i])
+            .sum::<f32>()
+            / 9.0
+    };
+    let residual = (centre(patch) - b * centre(t)).abs() as f64;
+    residual <= max_rel * (b.abs() * (hi - lo)) as f64
+}
+
+/// Final election (paper III-B) of pre-filter candidates.
+///
+/// For each candidate: edge orientations from the quadratic surface fit (eq. 3–4; candidates
+/// whose surface is not a saddle are dropped), the nearest template of the 36 × 36 bank (edge
+/// angle and bisector direction in 5° steps), then a hill-climb to the neighbouring template with
+/// the highest `|NCC|` (eq. 5) against the 15 × 15 patch centred on the candidate; templates with
+/// an edge angle under `min_edge_angle` are not used. The patch centre must agree with the template
+/// (`max_centre_residual`: at an X-junction the centre is mid-grey; on a line or stroke, which a
+/// narrow-wedge template matches too, it is the darkest or brightest part), and the patch must be
+/// point-symmetric about the candidate (`min_symmetry`). A candidate is
+/// elected when its score is at least `max(best − t_correlation, min_score)`, `best` being the
+/// highest score in the image, and its amplitude (contrast) is at least `min_contrast_rel` times
+/// that of a typical strong corner; elected corners closer than `min_distance` are merged (the
+/// best one stays). Returns corners strongest first, at their integer pixel positions; `angles` are the
+/// orientations of the winning template (multiples of 2.5°, wrapped to `[0, π)`).
+/// Candidates within 7 px of the border (the template would leave the image) are dropped.
+pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
+    let mut scored: Vec<(Corner, f32)> = candidates
+        .par_iter()
+        .filter_map(|c| {
+            let (score, amplitude, angles) = score_candidate(image, c, params)?;
+            let corner = Corner {
+                x: c.x as f64,
+                y: c.y as f64,
+                angles,
+                score: score as f64,
+            };
+            Some((corner, amplitude))
+        })
+        .collect();
+    let best = scored.iter().map(|c| c.0.score).fold(0.0, f64::max);
+    let threshold = (best - params.t_correlation).max(params.min_score);
+    scored.retain(|c| c.0.score >= threshold);
+    // Contrast rule: the median amplitude of the strongest few is a typical board corner.
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let top = &scored[..scored.len().min(CONTRAST_REFERENCE_COUNT)];
+    let reference = top.get(top.len() / 2).map_or(0.0, |c| c.1) as f64;
+    let min_amplitude = params.min_contrast_rel * reference;
+    let mut scored: Vec<Corner> = scored
+        .into_iter()
+        .filter(|c| c.1 as f64 >= min_amplitude)
+        .map(|c| c.0)
+        .collect();
+    scored.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.y.total_cmp(&b.y)));
+    deduplicate(scored, params.min_distance)
+}
+
+/// Greedy merge of corners (sorted best first) closer than `radius`, with a hash grid of cell
+/// `radius` so that each corner is compared with its 3 × 3 cells only.
+fn deduplicate(sorted: Vec<Corner>, radius: f64) -> Vec<Corner> {
+    if radius.is_nan() || radius <= 0.0 {
+        return sorted;
+    }
+    let cell = |v: f64| (v / radius).floor() as i64;
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    let mut kept: Vec<Corner> = Vec::with_capacity(sorted.len());
+    for c in sorted {
+        let (cx, cy) = (cell(c.x), cell(c.y));
+        let clash = (-1..=1).any(|dy| {
+            (-1..=1).any(|dx| {
+                grid.get(&(cx + dx, cy + dy)).is_some_and(|ids| {
+                    ids.iter()
+                        .any(|&i| (kept[i].x - c.x).hypot(kept[i].y - c.y) < radius)
+                })
+            })
+        });
+        if !clash {
+            grid.entry((cx, cy)).or_default().push(kept.len());
+            kept.push(c);
+        }
+    }
+    kept
+}
+
+/// Pixel-level checkerboard corners of `image`: [`prefilter`] then [`elect`]. Positions are
+/// integer pixels (the corner lies within about a pixel); refine them with [`crate::refine`].
+pub fn find_corners(
+    image: &GrayImage,
+    prefilter_params: &PrefilterParams,
+    election_params: &ElectionParams,
+) -> Vec<Corner> {
+    let candidates = prefilter(image, prefilter_params);
+    elect(image, &candidates, election_params)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::f64::consts::PI;
 
     fn angle_diff(a: f64, b: f64) -> f64 {
         let d = (a - b).rem_euclid(PI);
@@ -164,5 +497,305 @@ mod tests {
         let got = edge_orientations(&img, 20.3, 19.8, 7).unwrap();
         assert!(angle_diff(got[0], 0.4) < 0.2, "{got:?}");
         assert!(angle_diff(got[1], 1.7) < 0.3, "{got:?}");
+    }
+
+    // ---- election -------------------------------------------------------------------------
+
+    #[test]
+    fn template_index_inverts_template_angles() {
+        for e in 0..TEMPLATE_STEPS {
+            for d in 0..TEMPLATE_STEPS {
+                let [a, b] = template_angles(e, d);
+                // Angles straddling 0 wrap; the bank entry is found back when they do not.
+                if a >= 0.0 && b < PI {
+                    assert_eq!(template_index([a, b]), (e, d));
+                }
+            }
+        }
+        let bank = template_bank();
+        assert_eq!(bank.len(), TEMPLATE_STEPS * TEMPLATE_STEPS);
+        for t in bank.iter().step_by(97) {
+            assert!(t.iter().sum::<f32>().abs() < 1e-4);
+            assert!((t.iter().map(|v| v * v).sum::<f32>() - 1.0).abs() < 1e-4);
+        }
+    }
+
+    /// Separable Gaussian blur with clamped borders (test helper).
+    fn blur(img: &GrayImage, sigma: f64) -> GrayImage {
+        let r = (3.0 * sigma).ceil() as isize;
+        let k: Vec<f32> = (-r..=r)
+            .map(|t| (-(t * t) as f64 / (2.0 * sigma * sigma)).exp() as f32)
+            .collect();
+        let ks: f32 = k.iter().sum();
+        let (w, h) = (img.width() as isize, img.height() as isize);
+        let pass = |src: &[f32], horizontal: bool| -> Vec<f32> {
+            let mut out = vec![0f32; src.len()];
+            for y in 0..h {
+                for x in 0..w {
+                    let mut acc = 0.0;
+                    for (i, kv) in k.iter().enumerate() {
+                        let t = i as isize - r;
+                        let (sx, sy) = if horizontal {
+                            ((x + t).clamp(0, w - 1), y)
+                        } else {
+                            (x, (y + t).clamp(0, h - 1))
+                        };
+                        acc += kv * src[(sy * w + sx) as usize];
+                    }
+                    out[(y * w + x) as usize] = acc / ks;
+                }
+            }
+            out
+        };
+        let tmp = pass(img.data(), true);
+        GrayImage::from_vec(img.width(), img.height(), pass(&tmp, false)).unwrap()
+    }
+
+    /// Distance from `p` to segment `a`–`b`.
+    fn seg_dist(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
+        let (vx, vy) = (b.0 - a.0, b.1 - a.1);
+        let t = (((p.0 - a.0) * vx + (p.1 - a.1) * vy) / (vx * vx + vy * vy)).clamp(0.0, 1.0);
+        (p.0 - a.0 - t * vx).hypot(p.1 - a.1 - t * vy)
+    }
+
+    /// A 380 × 280 scene: optionally a rotated 11 × 6-square board (18 px squares, white quiet
+    /// zone, a dot in every third square as in HydraMarker), and always a field of 2 px pinstripes,
+    /// a pinstripe grid, a dark rectangle, a few random pen strokes, blur σ = 1 and noise σ = 4.
+    /// Returns the image and the 50 inner board corners.
+    fn scene(with_board: bool, seed: u64) -> (GrayImage, Vec<(f64, f64)>) {
+        use rand::{Rng, SeedableRng};
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let (w, h) = (380usize, 280usize);
+        let (sq, cols, rows) = (18.0, 11usize, 6usize);
+        let (ox, oy, rot) = (70.0, 30.0, 0.3f64);
+        let (c, s) = (rot.cos(), rot.sin());
+        let to_board = |x: f64, y: f64| {
+            let (dx, dy) = (x - ox, y - oy);
+            (c * dx + s * dy, -s * dx + c * dy)
+        };
+        let strokes: Vec<Vec<(f64, f64)>> = (0..4)
+            .map(|_| {
+                let mut p = (rng.gen_range(250.0..370.0), rng.gen_range(180.0..270.0));
+                let mut heading: f64 = rng.gen_range(0.0..2.0 * PI);
+                (0..12)
+                    .map(|_| {
+                        heading += rng.gen_range(-0.6..0.6);
+                        p = (p.0 + 6.0 * heading.cos(), p.1 + 6.0 * heading.sin());
+                        p
+                    })
+                    .collect()
+            })
+            .collect();
+        let shade = |x: f64, y: f64| -> f64 {
+            let (u, v) = to_board(x, y);
+            let (bw, bh) = (cols as f64 * sq, rows as f64 * sq);
+            if with_board && u > -9.0 && v > -9.0 && u < bw + 9.0 && v < bh + 9.0 {
+                if u < 0.0 || v < 0.0 || u >= bw || v >= bh {
+                    return 235.0; // quiet zone
+                }
+                let (i, j) = ((u / sq).floor(), (v / sq).floor());
+                let dark = (i + j) as i64 % 2 == 0;
+                let (cu, cv) = ((i + 0.5) * sq, (j + 0.5) * sq);
+                let dot =
+                    (i as i64 * 7 + j as i64 * 3) % 3 == 0 && (u - cu).hypot(v - cv) < 0.22 * sq;
+                return if dark != dot { 30.0 } else { 220.0 };
+            }
+            // pinstripes: vertical 2 px lines every 6 px
+            if (300.0..370.0).contains(&x) && (15.0..150.0).contains(&y) {
+                return if (x - 300.0).rem_euclid(6.0) < 2.0 {
+                    40.0
+                } else {
+                    200.0
+                };
+            }
+            // pinstripe grid: 2 px lines every 9 px both ways
+            if (15.0..120.0).contains(&x) && (200.0..270.0).contains(&y) {
+                let on = (x - 15.0).rem_euclid(9.0) < 2.0 || (y - 200.0).rem_euclid(9.0) < 2.0;
+                return if on { 50.0 } else { 210.0 };
+            }
+            // a dark rectangle (four L corners)
+            if (140.0..200.0).contains(&x) && (215.0..255.0).contains(&y) {
+                return 45.0;
+            }
+            for st in &strokes {
+                if st.windows(2).any(|ab| seg_dist((x, y), ab[0], ab[1]) < 1.3) {
+                    return 35.0;
+                }
+            }
+            150.0
+        };
+        let mut data = vec![0f32; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0;
+                for sy in 0..3 {
+                    for sx in 0..3 {
+                        let (px, py) = (
+                            x as f64 + (sx as f64 - 1.0) / 3.0,
+                            y as f64 + (sy as f64 - 1.0) / 3.0,
+                        );
+                        acc += shade(px, py);
+                    }
+                }
+                data[y * w + x] = (acc / 9.0) as f32;
+            }
+        }
+        let img = blur(&GrayImage::from_vec(w, h, data).unwrap(), 1.0);
+        let noise = Normal::new(0.0, 4.0).unwrap();
+        let noisy: Vec<f32> = img
+            .data()
+            .iter()
+            .map(|&v| v + noise.sample(&mut rng) as f32)
+            .collect();
+        let truth = if with_board {
+            (1..rows)
+                .flat_map(|j| (1..cols).map(move |i| (i as f64 * sq, j as f64 * sq)))
+                .map(|(u, v)| (ox + c * u - s * v, oy + s * u + c * v))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        (GrayImage::from_vec(w, h, noisy).unwrap(), truth)
+    }
+
+    fn nearest(p: (f64, f64), set: &[(f64, f64)]) -> f64 {
+        set.iter()
+            .map(|q| (p.0 - q.0).hypot(p.1 - q.1))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn finds_every_board_corner_and_nothing_else() {
+        for seed in [1, 2, 3] {
+            let (img, truth) = scene(true, seed);
+            assert_eq!(truth.len(), 50);
+            let cands = prefilter(&img, &PrefilterParams::default());
+            assert!(cands.len() < 500, "{} candidates", cands.len());
+            let cand_pts: Vec<_> = cands.iter().map(|c| (c.x as f64, c.y as f64)).collect();
+            for &t in &truth {
+                assert!(
+                    nearest(t, &cand_pts) <= 1.5,
+                    "seed {seed}: {t:?} not a candidate"
+                );
+            }
+            let corners = find_corners(
+                &img,
+                &PrefilterParams::default(),
+                &ElectionParams::default(),
+            );
+            let found: Vec<_> = corners.iter().map(|c| (c.x, c.y)).collect();
+            for &t in &truth {
+                assert!(nearest(t, &found) <= 1.5, "seed {seed}: missed {t:?}");
+            }
+            for c in &corners {
+                assert!(
+                    nearest((c.x, c.y), &truth) <= 1.5,
+                    "seed {seed}: false corner {c:?}"
+                );
+                assert!(c.score >= 0.65 && c.score <= 1.0);
+            }
+            assert_eq!(corners.len(), truth.len(), "seed {seed}");
+            // The elected templates follow the board: edges at 0.3 rad and 0.3 + π/2.
+            for c in &corners {
+                let ok = |a: f64| angle_diff(a, 0.3) < 0.12 || angle_diff(a, 0.3 + PI / 2.0) < 0.12;
+                assert!(ok(c.angles[0]) && ok(c.angles[1]), "{c:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_paper_rule_with_known_corner_count_agrees() {
+        let (img, truth) = scene(true, 4);
+        let pre = PrefilterParams {
+            expected_corners: Some(50),
+            ..Default::default()
+        };
+        let corners = find_corners(&img, &pre, &ElectionParams::default());
+        assert_eq!(corners.len(), truth.len());
+    }
+
+    #[test]
+    fn distractors_alone_yield_nothing() {
+        for seed in [5, 6] {
+            let (img, _) = scene(false, seed);
+            let corners = find_corners(
+                &img,
+                &PrefilterParams::default(),
+                &ElectionParams::default(),
+            );
+            assert!(corners.is_empty(), "{corners:?}");
+        }
+        let flat = GrayImage::filled(64, 64, 100.0).unwrap();
+        assert!(find_corners(
+            &flat,
+            &PrefilterParams::default(),
+            &ElectionParams::default()
+        )
+        .is_empty());
+    }
+
+    #[test]
+    fn oblique_corner_is_elected_with_its_true_edges() {
+        // A 65° X-junction: the surface fit says ~90°, the hill-climb finds the right template.
+        let (t1, t2) = (0.4, 0.4 + 65f64.to_radians());
+        let img = blur(&checker(t1, t2, 20.0, 20.0), 0.8);
+        let cand = [Candidate {
+            x: 20,
+            y: 20,
+            score: 1.0,
+        }];
+        let got = elect(&img, &cand, &ElectionParams::default());
+        assert_eq!(got.len(), 1);
+        assert!(got[0].score > 0.9, "{:?}", got[0]);
+        assert!(angle_diff(got[0].angles[0], t1) < 0.07, "{:?}", got[0]);
+        assert!(angle_diff(got[0].angles[1], t2) < 0.07, "{:?}", got[0]);
+    }
+
+    #[test]
+    fn border_and_bad_candidates_are_dropped_without_panic() {
+        let img = checker(0.4, 0.4 + PI / 2.0, 20.3, 19.8);
+        let cands = [
+            Candidate {
+                x: 3,
+                y: 20,
+                score: 1.0,
+            },
+            Candidate {
+                x: 40,
+                y: 40,
+                score: 1.0,
+            },
+            Candidate {
+                x: 1000,
+                y: 5,
+                score: 1.0,
+            },
+            Candidate {
+                x: 20,
+                y: 20,
+                score: 1.0,
+            },
+            Candidate {
+                x: 21,
+                y: 20,
+                score: 1.0,
+            },
+        ];
+        let got = elect(&img, &cands, &ElectionParams::default());
+        assert_eq!(got.len(), 1, "{got:?}");
+        let tiny = GrayImage::filled(3, 2, 1.0).unwrap();
+        assert!(elect(&tiny, &cands, &ElectionParams::default()).is_empty());
+        let silly = ElectionParams {
+            fit_half: 1000,
+            min_distance: f64::NAN,
+            t_correlation: f64::NAN,
+            min_score: f64::NAN,
+            min_edge_angle: f64::NAN,
+            max_centre_residual: f64::NAN,
+            min_symmetry: f64::NAN,
+            min_contrast_rel: f64::NAN,
+        };
+        assert!(elect(&img, &cands, &silly).is_empty());
     }
 }

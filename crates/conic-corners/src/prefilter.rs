@@ -1,1 +1,560 @@
-//! (stage under construction)
+//! Corner pre-filter (paper III-A): a Hessian saddle score at one Gaussian scale, a conservative
+//! non-maximum suppression, and a cut that keeps a manageable number of candidates for the
+//! template election ([`crate::election`]).
+//!
+//! All positions are integer pixel coordinates (pixel centres at integers, x right, y down).
+
+use crate::GrayImage;
+use rayon::prelude::*;
+
+/// Smallest Gaussian scale accepted by [`hessian_score`]; smaller values are raised to it.
+pub const MIN_SIGMA: f32 = 0.5;
+/// Largest Gaussian scale accepted by [`hessian_score`]; larger values are lowered to it.
+pub const MAX_SIGMA: f32 = 32.0;
+/// Kernel radius in units of σ. A Gaussian truncated at 3σ loses 0.3 % of its mass; the derivative
+/// kernels are corrected for the truncation (see [`Kernels`]), so the score is unbiased.
+const RADIUS_SIGMAS: f32 = 3.0;
+/// Rows per parallel band of [`hessian_score`]: large enough that the `2r` rows of horizontal
+/// pass each band recomputes at its top are a small overhead.
+const BAND_ROWS: usize = 64;
+/// The adaptive cut of [`prefilter`] takes its reference score as the median of this many
+/// strongest candidates, so that a few isolated peaks stronger than any corner (glints, a sharp
+/// junction in the background) cannot raise the threshold above the board.
+const REFERENCE_COUNT: usize = 16;
+
+/// One-sided taps (`k = 0..=r`) of the Gaussian and of its first and second derivatives, in
+/// correlation form: `Σ_k K[k]·f(x+k)` with `K[−k] = K[k]` (smoothing, second derivative) or
+/// `K[−k] = −K[k]` (first derivative). After truncation to `|k| ≤ r` they are renormalized so
+/// that the smoothing kernel sums to 1, the first-derivative kernel gives `f' = 1` on `f = x`,
+/// and the second-derivative kernel gives 0 on constants and `f'' = 2` on `f = x²`.
+struct Kernels {
+    g: Vec<f32>,
+    d1: Vec<f32>,
+    d2: Vec<f32>,
+}
+
+impl Kernels {
+    fn new(sigma: f32) -> Self {
+        let s = sigma as f64;
+        let r = (RADIUS_SIGMAS * sigma).ceil().max(1.0) as usize;
+        let gauss: Vec<f64> = (0..=r)
+            .map(|k| (-((k * k) as f64) / (2.0 * s * s)).exp())
+            .collect();
+        // Sums over −r..=r of the symmetric / antisymmetric extensions.
+        let sym_sum = |v: &[f64], p: i32| -> f64 {
+            v.iter()
+                .enumerate()
+                .map(|(k, &x)| {
+                    let w = if k == 0 { 1.0 } else { 2.0 };
+                    w * x * (k as f64).powi(p)
+                })
+                .sum()
+        };
+        let g_norm = sym_sum(&gauss, 0);
+        let g: Vec<f32> = gauss.iter().map(|&v| (v / g_norm) as f32).collect();
+        let d1_raw: Vec<f64> = gauss
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| k as f64 * v)
+            .collect();
+        let d1_norm = sym_sum(&d1_raw, 1);
+        let d1 = d1_raw.iter().map(|&v| (v / d1_norm) as f32).collect();
+        let mut d2_raw: Vec<f64> = gauss
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| ((k * k) as f64 / (s * s) - 1.0) * v)
+            .collect();
+        // Remove the DC leak of the truncated kernel by subtracting a multiple of the Gaussian.
+        let leak = sym_sum(&d2_raw, 0) / sym_sum(&gauss, 0);
+        for (d, &v) in d2_raw.iter_mut().zip(&gauss) {
+            *d -= leak * v;
+        }
+        let d2_norm = sym_sum(&d2_raw, 2) / 2.0;
+        let d2 = d2_raw.iter().map(|&v| (v / d2_norm) as f32).collect();
+        Self { g, d1, d2 }
+    }
+
+    fn radius(&self) -> usize {
+        self.g.len() - 1
+    }
+}
+
+/// Scratch rows for one band: the clamped-padded input row and a ring of `2r+1` rows of each
+/// horizontal pass (smoothing, first and second derivative along x).
+struct BandScratch {
+    padded: Vec<f32>,
+    h0: Vec<f32>,
+    h1: Vec<f32>,
+    h2: Vec<f32>,
+}
+
+/// Lanes processed together by the inner loops: accumulators stay in registers and each tap loads
+/// its inputs once, which matters more than the arithmetic here.
+const LANES: usize = 16;
+
+/// `a·b + c`, as one fused instruction when `FUSED` (only used where FMA is enabled).
+#[inline(always)]
+fn madd<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
+    if FUSED {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
+}
+
+/// Horizontal pass over `L` consecutive outputs starting at `x0`.
+#[inline(always)]
+fn horizontal_chunk<const L: usize, const FUSED: bool>(
+    k: &Kernels,
+    padded: &[f32],
+    x0: usize,
+    h0: &mut [f32],
+    h1: &mut [f32],
+    h2: &mut [f32],
+) {
+    let r = k.radius();
+    let c: &[f32; L] = padded[x0 + r..x0 + r + L].try_into().unwrap();
+    let mut a0 = c.map(|v| k.g[0] * v);
+    let mut a2 = c.map(|v| k.d2[0] * v);
+    let mut a1 = [0f32; L];
+    for t in 1..=r {
+        let (g, d1, d2) = (k.g[t], k.d1[t], k.d2[t]);
+        let right: &[f32; L] = padded[x0 + r + t..x0 + r + t + L].try_into().unwrap();
+        let left: &[f32; L] = padded[x0 + r - t..x0 + r - t + L].try_into().unwrap();
+        for i in 0..L {
+            let (sum, diff) = (right[i] + left[i], right[i] - left[i]);
+            a0[i] = madd::<FUSED>(g, sum, a0[i]);
+            a1[i] = madd::<FUSED>(d1, diff, a1[i]);
+            a2[i] = madd::<FUSED>(d2, sum, a2[i]);
+        }
+    }
+    // Element-wise stores: `copy_from_slice` here becomes a `memcpy` call per chunk.
+    let (h0, h1, h2) = (
+        &mut h0[x0..x0 + L],
+        &mut h1[x0..x0 + L],
+        &mut h2[x0..x0 + L],
+    );
+    for i in 0..L {
+        (h0[i], h1[i], h2[i]) = (a0[i], a1[i], a2[i]);
+    }
+}
+
+/// Horizontal pass of image row `y` into ring slot `slot` of `s`.
+#[inline(always)]
+fn horizontal_row<const FUSED: bool>(
+    image: &GrayImage,
+    k: &Kernels,
+    y: usize,
+    slot: usize,
+    s: &mut BandScratch,
+) {
+    let w = image.width();
+    let r = k.radius();
+    let row = image.row(y);
+    // Clamp-to-edge padding: a step edge stays a step up to the border.
+    s.padded[..r].fill(row[0]);
+    s.padded[r..r + w].copy_from_slice(row);
+    s.padded[r + w..].fill(row[w - 1]);
+    let h0 = &mut s.h0[slot * w..(slot + 1) * w];
+    let h1 = &mut s.h1[slot * w..(slot + 1) * w];
+    let h2 = &mut s.h2[slot * w..(slot + 1) * w];
+    let body = w - w % LANES;
+    for x0 in (0..body).step_by(LANES) {
+        horizontal_chunk::<LANES, FUSED>(k, &s.padded, x0, h0, h1, h2);
+    }
+    for x0 in body..w {
+        horizontal_chunk::<1, FUSED>(k, &s.padded, x0, h0, h1, h2);
+    }
+}
+
+/// Vertical pass and score over `L` consecutive outputs starting at `x0`, for the row whose
+/// horizontal passes sit in ring slots `slots[r]` (centre) and `slots[r ± t]`.
+#[inline(always)]
+fn vertical_chunk<const L: usize, const FUSED: bool>(
+    k: &Kernels,
+    s: &BandScratch,
+    w: usize,
+    slots: &[usize],
+    x0: usize,
+    out: &mut [f32],
+) {
+    let r = k.radius();
+    let at = |buf: &[f32], slot: usize| -> [f32; L] {
+        let o = slot * w + x0;
+        buf[o..o + L].try_into().unwrap()
+    };
+    let c0 = at(&s.h0, slots[r]);
+    let c2 = at(&s.h2, slots[r]);
+    let mut xx = c2.map(|v| k.g[0] * v);
+    let mut yy = c0.map(|v| k.d2[0] * v);
+    let mut xy = [0f32; L];
+    for t in 1..=r {
+        let (g, d1, d2) = (k.g[t], k.d1[t], k.d2[t]);
+        let (dn, up) = (slots[r + t], slots[r - t]);
+        let (h0d, h0u) = (at(&s.h0, dn), at(&s.h0, up));
+        let (h1d, h1u) = (at(&s.h1, dn), at(&s.h1, up));
+        let (h2d, h2u) = (at(&s.h2, dn), at(&s.h2, up));
+        for i in 0..L {
+            xx[i] = madd::<FUSED>(g, h2d[i] + h2u[i], xx[i]);
+            yy[i] = madd::<FUSED>(d2, h0d[i] + h0u[i], yy[i]);
+            xy[i] = madd::<FUSED>(d1, h1d[i] - h1u[i], xy[i]);
+        }
+    }
+    for i in 0..L {
+        out[x0 + i] = madd::<FUSED>(xy[i], xy[i], -xx[i] * yy[i]);
+    }
+}
+
+/// Score rows `y0..y0 + out.len() / width` into `out` (one band), with the widest vector unit
+/// the CPU has (the arithmetic is the same, so results agree to rounding).
+fn score_band(image: &GrayImage, k: &Kernels, y0: usize, out: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: AVX2 and FMA support were just checked at run time.
+        unsafe { score_band_avx2(image, k, y0, out) };
+        return;
+    }
+    score_band_generic::<false>(image, k, y0, out);
+}
+
+/// [`score_band_generic`] compiled for AVX2 + FMA (8 `f32` lanes instead of SSE2's 4, fused
+/// multiply-adds): about 2.5× faster than the baseline x86-64 build.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn score_band_avx2(image: &GrayImage, k: &Kernels, y0: usize, out: &mut [f32]) {
+    score_band_generic::<true>(image, k, y0, out);
+}
+
+#[inline(always)]
+fn score_band_generic<const FUSED: bool>(
+    image: &GrayImage,
+    k: &Kernels,
+    y0: usize,
+    out: &mut [f32],
+) {
+    let (w, h) = (image.width(), image.height());
+    let r = k.radius();
+    let ring = 2 * r + 1;
+    let mut s = BandScratch {
+        padded: vec![0.0; w + 2 * r],
+        h0: vec![0.0; ring * w],
+        h1: vec![0.0; ring * w],
+        h2: vec![0.0; ring * w],
+    };
+    // Logical row j (may lie outside the image: clamped) lives in ring slot j mod (2r+1).
+    let slot = |j: isize| (j.rem_euclid(ring as isize)) as usize;
+    let clamp_row = |j: isize| j.clamp(0, h as isize - 1) as usize;
+    let first = y0 as isize - r as isize;
+    for j in first..first + 2 * r as isize {
+        horizontal_row::<FUSED>(image, k, clamp_row(j), slot(j), &mut s);
+    }
+    let mut slots = vec![0usize; ring];
+    let body = w - w % LANES;
+    for (i, out_row) in out.chunks_exact_mut(w).enumerate() {
+        let y = (y0 + i) as isize;
+        let newest = y + r as isize;
+        horizontal_row::<FUSED>(image, k, clamp_row(newest), slot(newest), &mut s);
+        for (d, sl) in slots.iter_mut().enumerate() {
+            *sl = slot(y - r as isize + d as isize);
+        }
+        for x0 in (0..body).step_by(LANES) {
+            vertical_chunk::<LANES, FUSED>(k, &s, w, &slots, x0, out_row);
+        }
+        for x0 in body..w {
+            vertical_chunk::<1, FUSED>(k, &s, w, &slots, x0, out_row);
+        }
+    }
+}
+
+/// The Hessian saddle score `S = Gxy² − Gxx·Gyy = −λ₁λ₂` (paper eq. 2) of every pixel.
+///
+/// `Gxx`, `Gyy`, `Gxy` are the second derivatives of the image smoothed by a Gaussian of standard
+/// deviation `sigma` (pixels), computed by separable correlation with sampled Gaussian-derivative
+/// kernels of radius `⌈3σ⌉`, the image border extended by clamping. `S > 0` exactly where the
+/// Hessian is indefinite (a saddle, as at a checkerboard corner), `S < 0` on blobs and line
+/// crossings, and `S ≈ 0` along straight edges and lines (rank-one Hessian). Units are
+/// intensity²/px⁴, so `S` scales with the square of the contrast.
+///
+/// `sigma` is clamped to [`MIN_SIGMA`]..=[`MAX_SIGMA`] (a NaN becomes 2). Rows are processed in
+/// bands in parallel on the rayon pool; each band keeps a ring of `2r+1` horizontally filtered rows,
+/// so the work is `O(r)` per pixel and the extra memory is `O(r·width)` per band.
+pub fn hessian_score(image: &GrayImage, sigma: f32) -> GrayImage {
+    let sigma = if sigma.is_nan() {
+        2.0
+    } else {
+        sigma.clamp(MIN_SIGMA, MAX_SIGMA)
+    };
+    let k = Kernels::new(sigma);
+    let (w, h) = (image.width(), image.height());
+    let mut out = vec![0f32; w * h];
+    out.par_chunks_mut(BAND_ROWS * w)
+        .enumerate()
+        .for_each(|(b, band)| score_band(image, &k, b * BAND_ROWS, band));
+    GrayImage::from_vec(w, h, out).expect("same size as the input image")
+}
+
+/// A corner candidate: an integer pixel and its Hessian score [`hessian_score`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// Column of the pixel (its centre is at image x = `x`).
+    pub x: usize,
+    /// Row of the pixel (its centre is at image y = `y`).
+    pub y: usize,
+    /// Saddle score `S` at the pixel (> 0).
+    pub score: f32,
+}
+
+/// Parameters of [`prefilter`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrefilterParams {
+    /// Gaussian scale of the Hessian, pixels. The default 2 px responds well to corners whose
+    /// squares are ≥ 12 px wide (the score of a corner peaks for σ a fraction of the square size
+    /// and the neighbouring corners start to interfere for σ above ~⅙ of it) and to optical blur up
+    /// to ~3 px; raise it for very blurred or very large boards.
+    pub sigma: f32,
+    /// `n_nms` (paper: 3): a candidate must be the maximum of the score in the
+    /// `(2·n_nms+1)²` window around it, so two candidates are more than `n_nms` pixels apart
+    /// (Chebyshev distance) unless they tie.
+    pub nms_radius: usize,
+    /// `τ_nms` (paper: 2). The paper calls it "the dimension of the non-maximum suppression"
+    /// without further detail; in the conservative block NMS it cites (Neubeck & Van Gool, as used
+    /// by Geiger et al.) the extra parameters are a score threshold and a border margin. Scores
+    /// here have no absolute scale (they go with contrast²), so the threshold is the adaptive rule
+    /// ([`PrefilterParams::min_score_rel`]) and `nms_tau` is the **border margin**: pixels closer
+    /// than `nms_tau` to the image border are never candidates (their score is distorted by the
+    /// clamped border).
+    pub nms_tau: usize,
+    /// Number of corners expected in the image, if known. Then, as in the paper, the `2·N`
+    /// strongest candidates are kept and `min_score_rel` is ignored.
+    pub expected_corners: Option<usize>,
+    /// Adaptive cut used when `expected_corners` is `None`: keep candidates whose score is at least
+    /// this fraction of the reference score, the median of the 16 strongest candidates (a typical
+    /// strong corner when a board is present). The score goes with contrast², so the default 0.01
+    /// keeps corners down to 1/10 of the contrast of the strong ones.
+    pub min_score_rel: f32,
+    /// Hard cap on the number of candidates returned (the strongest are kept), whatever the rule.
+    pub max_candidates: usize,
+}
+
+impl Default for PrefilterParams {
+    fn default() -> Self {
+        Self {
+            sigma: 2.0,
+            nms_radius: 3,
+            nms_tau: 2,
+            expected_corners: None,
+            min_score_rel: 0.05,
+            max_candidates: 20_000,
+        }
+    }
+}
+
+/// Positive local maxima of `score` by block non-maximum suppression (Neubeck & Van Gool): the
+/// image is tiled in `(n+1)²` blocks, the maximum of each block is found, then accepted if no pixel
+/// of its `(2n+1)²` neighbourhood outside the block is strictly larger. Ties are kept
+/// ("conservative"), so a plateau can yield several candidates. Pixels within `margin` of the
+/// border are ignored.
+pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Vec<Candidate> {
+    let (w, h) = (score.width(), score.height());
+    let mut out = Vec::new();
+    if w <= 2 * margin || h <= 2 * margin {
+        return out;
+    }
+    let (x_end, y_end) = (w - margin, h - margin);
+    let step = n + 1;
+    let data = score.data();
+    for by in (margin..y_end).step_by(step) {
+        for bx in (margin..x_end).step_by(step) {
+            let (bx1, by1) = ((bx + step).min(x_end), (by + step).min(y_end));
+            let (mut mx, mut my, mut mv) = (bx, by, f32::NEG_INFINITY);
+            for y in by..by1 {
+                for (x, &v) in data[y * w + bx..y * w + bx1].iter().enumerate() {
+                    if v > mv {
+                        (mx, my, mv) = (bx + x, y, v);
+                    }
+                }
+            }
+            if mv.is_nan() || mv <= 0.0 {
+                continue;
+            }
+            let (x0, x1) = (mx.saturating_sub(n).max(margin), (mx + n + 1).min(x_end));
+            let (y0, y1) = (my.saturating_sub(n).max(margin), (my + n + 1).min(y_end));
+            let beaten = (y0..y1).any(|y| {
+                let in_block_row = (by..by1).contains(&y);
+                data[y * w + x0..y * w + x1]
+                    .iter()
+                    .enumerate()
+                    .any(|(i, &v)| v > mv && !(in_block_row && (bx..bx1).contains(&(x0 + i))))
+            });
+            if !beaten {
+                out.push(Candidate {
+                    x: mx,
+                    y: my,
+                    score: mv,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Corner candidates of `image`, strongest first: [`hessian_score`] at `params.sigma`, then
+/// [`non_maximum_suppression`], then the cut.
+///
+/// The cut keeps the `2N` strongest when `params.expected_corners = Some(N)` (paper III-A).
+/// Otherwise it is adaptive, so that the user need not know `N`: with `S_ref` the median score of
+/// the 16 strongest candidates, candidates with `S ≥ min_score_rel · S_ref` are kept. Noise and
+/// texture give many weak saddles and straight edges give none, so on a board image this keeps
+/// all corners and a few hundred distractors at most, which the template election rejects.
+/// At most `params.max_candidates` are returned. An image too small for the margin gives none.
+pub fn prefilter(image: &GrayImage, params: &PrefilterParams) -> Vec<Candidate> {
+    let score = hessian_score(image, params.sigma);
+    let mut cands = non_maximum_suppression(&score, params.nms_radius, params.nms_tau);
+    cands.sort_unstable_by(|a, b| b.score.total_cmp(&a.score));
+    let keep = match params.expected_corners {
+        Some(n) => n.saturating_mul(2),
+        None => {
+            let refs = &cands[..cands.len().min(REFERENCE_COUNT)];
+            let reference = refs.get(refs.len() / 2).map_or(0.0, |c| c.score);
+            let rel = if params.min_score_rel.is_finite() {
+                params.min_score_rel.max(0.0)
+            } else {
+                0.0
+            };
+            let threshold = rel * reference;
+            cands.partition_point(|c| c.score >= threshold)
+        }
+    };
+    cands.truncate(keep.min(params.max_candidates));
+    cands
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Correlation with the full two-sided kernels, the slow obvious way.
+    fn apply(v: &[f32], k: &[f32], odd: bool, x: usize) -> f32 {
+        let r = k.len() as isize - 1;
+        let mut s = 0.0;
+        for t in -r..=r {
+            let xi = (x as isize + t).clamp(0, v.len() as isize - 1) as usize;
+            let kk = k[t.unsigned_abs()];
+            s += if odd && t < 0 { -kk } else { kk } * v[xi];
+        }
+        s
+    }
+
+    #[test]
+    fn kernels_differentiate_polynomials_exactly() {
+        for sigma in [0.5f32, 1.0, 2.0, 3.7] {
+            let k = Kernels::new(sigma);
+            let v: Vec<f32> = (0..80).map(|x| x as f32).collect();
+            let v2: Vec<f32> = (0..80).map(|x| 0.01 * (x as f32 - 37.0).powi(2)).collect();
+            let ones = vec![5.0f32; 80];
+            assert!((apply(&ones, &k.g, false, 40) - 5.0).abs() < 1e-4);
+            assert!((apply(&v, &k.d1, true, 40) - 1.0).abs() < 1e-4);
+            assert!(apply(&ones, &k.d2, false, 40).abs() < 1e-4);
+            assert!((apply(&v2, &k.d2, false, 40) - 0.02).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn score_of_a_quadratic_saddle_is_its_determinant() {
+        // I = a x² + b xy + c y²: Gxx = 2a, Gyy = 2c, Gxy = b, S = b² − 4ac everywhere
+        // away from the border.
+        let (a, b, c) = (0.3f32, 0.5, -0.2);
+        let (w, h) = (60, 50);
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 - 30.0, (i / w) as f32 - 25.0);
+                a * x * x + b * x * y + c * y * y
+            })
+            .collect();
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        let s = hessian_score(&img, 2.0);
+        let want = b * b - 4.0 * a * c;
+        for (x, y) in [(30, 25), (10, 10), (45, 38)] {
+            assert!((s.get(x, y) - want).abs() < 1e-3 * want, "{}", s.get(x, y));
+        }
+    }
+
+    #[test]
+    fn straight_edges_score_nothing_and_blobs_score_negative() {
+        let (w, h) = (64, 64);
+        let mut data = vec![0f32; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                // an oblique straight edge on the left half, a disc on the right half
+                let edge = (x as f32 * 0.6 + y as f32 * 0.8) > 30.0 && x < 28;
+                let disc = (x as f32 - 46.0).powi(2) + (y as f32 - 32.0).powi(2) < 25.0;
+                data[y * w + x] = if edge || disc { 200.0 } else { 20.0 };
+            }
+        }
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        let s = hessian_score(&img, 2.0);
+        assert!(s.get(46, 32) < 0.0);
+        // On an edge away from its ends the Hessian is rank one up to pixelization.
+        let on_edge = s.get(12, 28).abs();
+        let saddle_scale = 10.0 * 180.0f32.powi(2) / (2.0f32.powi(4) * 100.0);
+        assert!(on_edge < 0.05 * saddle_scale, "{on_edge}");
+    }
+
+    #[test]
+    fn parallel_bands_match_a_single_band() {
+        let (w, h) = (37, 150);
+        let data = (0..w * h)
+            .map(|i| ((i * 7919) % 251) as f32)
+            .collect::<Vec<_>>();
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        let banded = hessian_score(&img, 1.5);
+        let k = Kernels::new(1.5);
+        let mut single = vec![0f32; w * h];
+        score_band(&img, &k, 0, &mut single);
+        assert_eq!(banded.data(), &single[..]);
+    }
+
+    #[test]
+    fn tiny_and_degenerate_inputs_do_not_panic() {
+        let one = GrayImage::filled(1, 1, 3.0).unwrap();
+        assert!(hessian_score(&one, 2.0).get(0, 0).abs() < 1e-9);
+        let thin = GrayImage::from_vec(5, 2, (0..10).map(|v| v as f32).collect()).unwrap();
+        for sigma in [f32::NAN, -1.0, 0.0, 1e9] {
+            let s = hessian_score(&thin, sigma);
+            assert!(s.data().iter().all(|v| v.is_finite()));
+        }
+        assert!(prefilter(&one, &PrefilterParams::default()).is_empty());
+        let flat = GrayImage::filled(40, 40, 7.0).unwrap();
+        assert!(prefilter(&flat, &PrefilterParams::default()).is_empty());
+        let p = PrefilterParams {
+            min_score_rel: f32::NAN,
+            expected_corners: Some(usize::MAX),
+            ..Default::default()
+        };
+        assert!(prefilter(&flat, &p).is_empty());
+    }
+
+    #[test]
+    fn nms_keeps_isolated_maxima_and_respects_radius_and_margin() {
+        let (w, h) = (30, 30);
+        let mut data = vec![0f32; w * h];
+        let peaks = [
+            (5, 5, 3.0),
+            (7, 6, 2.0),
+            (20, 8, 1.0),
+            (1, 15, 9.0),
+            (15, 25, 4.0),
+        ];
+        for &(x, y, v) in &peaks {
+            data[y * w + x] = v;
+        }
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        let mut got: Vec<_> = non_maximum_suppression(&img, 3, 2)
+            .into_iter()
+            .map(|c| (c.x, c.y))
+            .collect();
+        got.sort_unstable();
+        // (7, 6) is within 3 px of the stronger (5, 5); (1, 15) is inside the margin.
+        assert_eq!(got, vec![(5, 5), (15, 25), (20, 8)]);
+    }
+}
