@@ -137,28 +137,33 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     {
         return failed;
     }
-    let Some(directions) = initial_directions(image, start) else {
-        return failed;
-    };
     let mut walks = Walks::default();
-    // Pilot: short walks with a generous window measure the blur and a first corner.
+    // Pilot: short walks with a generous window measure the blur and a first corner. Each
+    // direction estimate is tried in turn until one gives a pilot solution.
     let pilot_sigma = params.blur.unwrap_or(2.0);
     let pilot = WalkConfig::pilot(pilot_sigma, params.reach.min(20.0 + 6.0 * pilot_sigma), params.stride);
-    walks.walk_all(image, start, directions, &pilot);
+    let mut found = None;
+    for directions in direction_candidates(image, start) {
+        walks.walk_all(image, start, directions, &pilot);
+        match walks.solve(start, params) {
+            Some(sol) if dist(sol.point, start) <= params.max_shift => {
+                found = Some((sol.point, sol.directions.unwrap_or(directions)));
+                break;
+            }
+            _ => found = found.or(Some((start, walks.directions().unwrap_or(directions)))),
+        }
+    }
+    let Some((centre, directions)) = found else {
+        return failed;
+    };
     let sigma = params
         .blur
         .or_else(|| walks.blur_estimate())
         .unwrap_or(pilot_sigma)
         .clamp(0.5, 12.0);
-    let (centre, directions) = match walks.solve(start, params, image) {
-        Some(sol) if dist(sol.point, start) <= params.max_shift => {
-            (sol.point, sol.directions.unwrap_or(directions))
-        }
-        _ => (start, walks.directions().unwrap_or(directions)),
-    };
     let full = WalkConfig::measure(sigma, params.reach, params.stride);
     walks.walk_all(image, centre, directions, &full);
-    match walks.solve(centre, params, image) {
+    match walks.solve(centre, params) {
         Some(sol) if dist(sol.point, start) <= params.max_shift => Refined {
             x: sol.point[0],
             y: sol.point[1],
@@ -174,35 +179,32 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
-/// Unit directions of the four rays in angular order, so that rays `k` and `k + 2` belong to the
-/// same edge.
+/// Candidate unit directions of the four rays, best first, each in angular order so that rays `k`
+/// and `k + 2` belong to the same edge.
 ///
 /// The quadratic surface fit (eq. 3–4) gives the two edge orientations, but a step corner is not a
-/// product of two planes: on an oblique corner its angles are off by up to ~20°. Each ray is
-/// therefore re-measured where the edge crosses a ring around `p`: the ring profile (averaged over
-/// a few radii, smoothed along the ring) crosses its mid-level exactly four times on a corner, and
-/// those crossings are the ray directions. When the ring does not show four clean crossings (noise,
-/// clutter, the border) the surface-fit directions are used.
-fn initial_directions(image: &GrayImage, p: [f64; 2]) -> Option<[[f64; 2]; 4]> {
-    [10.0, 6.0, 16.0]
-        .iter()
-        .find_map(|&r| ring_directions(image, p, r))
-        .or_else(|| {
-            [4usize, 7, 11]
-                .iter()
-                .find_map(|&h| edge_orientations(image, p[0], p[1], h))
-                .map(|[t1, t2]| {
-                    let (e1, e2) = ([t1.cos(), t1.sin()], [t2.cos(), t2.sin()]);
-                    [e1, e2, [-e1[0], -e1[1]], [-e2[0], -e2[1]]]
-                })
-        })
+/// product of two planes: on an oblique corner its angles are off by up to ~20°. So the rays are
+/// first measured where the edges cross rings around `p`: a ring profile (averaged over a few
+/// radii, smoothed along the ring) crosses its mid-level exactly four times on a corner, at the ray
+/// directions. Rings that do not show four clean crossings (noise, clutter, the border) are
+/// skipped; the surface-fit directions come last.
+fn direction_candidates(image: &GrayImage, p: [f64; 2]) -> impl Iterator<Item = [[f64; 2]; 4]> + '_ {
+    let rings = [10.0, 16.0, 6.0].into_iter().filter_map(move |r| ring_directions(image, p, r));
+    let surface = [4usize, 7, 11]
+        .into_iter()
+        .find_map(|h| edge_orientations(image, p[0], p[1], h))
+        .map(|[t1, t2]| {
+            let (e1, e2) = ([t1.cos(), t1.sin()], [t2.cos(), t2.sin()]);
+            [e1, e2, [-e1[0], -e1[1]], [-e2[0], -e2[1]]]
+        });
+    rings.chain(surface)
 }
 
 /// Angular resolution of the ring profile.
 const RING_STEPS: usize = 180;
 
 /// The four mid-level crossings of the intensity on a ring of radius `r` around `p`; see
-/// [`initial_directions`].
+/// [`direction_candidates`].
 fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 4]> {
     let mut ring = [0f32; RING_STEPS];
     for (i, v) in ring.iter_mut().enumerate() {
@@ -352,8 +354,7 @@ impl Walks {
     }
 
     /// Fits one curve per edge (rays k and k+2) and intersects them near `near`.
-    fn solve(&mut self, near: [f64; 2], params: &RefineParams, image: &GrayImage) -> Option<Solution> {
-        let _ = image;
+    fn solve(&mut self, near: [f64; 2], params: &RefineParams) -> Option<Solution> {
         let mut curves: [Option<Curve>; 2] = [None, None];
         let mut lines = [None, None];
         let mut status = Status::Converged;
