@@ -15,6 +15,7 @@
 //! | sample-chain segmentation (III-E) | [`segmentation`] |
 //! | conic / line fitting and intersection (III-F) | [`quadratic_form`] |
 //!
+//! [`detect`] runs the whole pipeline on an image.
 //! [`refine`] combines edge sampling and quadratic-form fitting into a single-corner refiner (a more
 //! accurate drop-in for OpenCV's `cornerSubPix`); [`synth`] renders test images with exact truth.
 //!
@@ -22,6 +23,7 @@
 //! (OpenCV's convention). Pixel `(i, j)` covers `[i - 0.5, i + 0.5] × [j - 0.5, j + 0.5]`.
 
 pub mod connectivity;
+pub mod detect;
 pub mod edge_sampling;
 pub mod election;
 pub mod image;

@@ -1,0 +1,182 @@
+//! The whole detection pipeline on one image: Hessian pre-filter → template election → Delaunay
+//! connectivity and grid labels → subpixel refinement of every labelled corner.
+//!
+//! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
+
+use crate::connectivity::{connect, label_with, ConnectivityParams, LabelParams};
+use crate::election::{elect, Corner, ElectionParams};
+use crate::prefilter::{prefilter, PrefilterParams};
+use crate::refine::{refine_one, RefineParams, Status};
+use crate::GrayImage;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Parameters of [`detect`]: one block per stage. `Default` is what the CLI uses.
+#[derive(Clone, Debug, Default)]
+pub struct DetectParams {
+    /// Pre-filter (III-A). Its `expected_corners` is the optional N of the paper.
+    pub prefilter: PrefilterParams,
+    /// Final election (III-B).
+    pub election: ElectionParams,
+    /// Connectivity (III-C).
+    pub connectivity: ConnectivityParams,
+    /// Labelling (III-C): smallest board kept.
+    pub labels: LabelParams,
+    /// Subpixel refinement of each corner; its `reach` is further bounded by the corner's
+    /// distance to its farthest grid neighbour.
+    pub refine: RefineParams,
+}
+
+impl DetectParams {
+    /// Checks the parameters a user sets; the message names the offending one.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.prefilter.expected_corners == Some(0) {
+            return Err("the expected corner count must be at least 1".into());
+        }
+        let sigma = self.prefilter.sigma;
+        if !(sigma.is_finite() && (0.5..=32.0).contains(&sigma)) {
+            return Err(format!("the pre-filter scale sigma must be in 0.5..=32 px, got {sigma}"));
+        }
+        self.refine.validate()
+    }
+}
+
+/// One labelled, refined corner of a board.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DetectedCorner {
+    /// Subpixel position (image coordinates).
+    pub x: f64,
+    /// Subpixel position (image coordinates).
+    pub y: f64,
+    /// Row on the board: rows increase towards +y (see [`crate::connectivity`]).
+    pub row: i32,
+    /// Column on the board: columns increase towards +x.
+    pub col: i32,
+    /// Template-matching score of the corner (normalized cross-correlation).
+    pub score: f64,
+    /// How the subpixel position was obtained; `Failed` keeps the pixel-level position.
+    pub status: Status,
+    /// RMS distance (px) of the edge samples to their curves; `None` when not refined.
+    pub residual: Option<f64>,
+}
+
+/// A board: its labelled corners, sorted by `(row, col)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Board {
+    /// `1 + max row`.
+    pub rows: usize,
+    /// `1 + max col`.
+    pub cols: usize,
+    /// The corners.
+    pub corners: Vec<DetectedCorner>,
+}
+
+/// Wall-clock time of each stage, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Timing {
+    /// Hessian score, non-maximum suppression, candidate selection.
+    pub prefilter: f64,
+    /// Template election.
+    pub election: f64,
+    /// Delaunay connectivity and labels.
+    pub connectivity: f64,
+    /// Subpixel refinement.
+    pub refine: f64,
+    /// The whole of [`detect`].
+    pub total: f64,
+}
+
+/// What [`detect`] found: every board (largest first) and the time each stage took.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Detection {
+    /// Boards, largest first. Empty when no board is in view.
+    pub boards: Vec<Board>,
+    /// Stage timings.
+    pub timing: Timing,
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// Finds every checkerboard-like board in `image`, labels its corners with `(row, col)` and
+/// refines them to subpixel accuracy. Parameters are expected to be valid
+/// ([`DetectParams::validate`]); an image without a board gives no boards.
+pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
+    let t0 = Instant::now();
+    let candidates = prefilter(image, &params.prefilter);
+    let prefilter_ms = ms(t0);
+    let t = Instant::now();
+    let corners = elect(image, &candidates, &params.election);
+    let election_ms = ms(t);
+    let t = Instant::now();
+    let graph = connect(&corners, &params.connectivity);
+    let labelled = label_with(&corners, &graph, &params.labels);
+    let connectivity_ms = ms(t);
+    let t = Instant::now();
+    let boards = labelled
+        .iter()
+        .map(|b| {
+            let refined: Vec<DetectedCorner> = b
+                .corners
+                .par_iter()
+                .zip(&b.labels)
+                .map(|(&i, &(row, col))| {
+                    let reach = neighbour_reach(&corners, &graph.neighbours[i], i);
+                    refine_corner(image, &corners[i], row, col, reach, &params.refine)
+                })
+                .collect();
+            Board {
+                rows: b.rows,
+                cols: b.cols,
+                corners: refined,
+            }
+        })
+        .collect();
+    let refine_ms = ms(t);
+    Detection {
+        boards,
+        timing: Timing {
+            prefilter: prefilter_ms,
+            election: election_ms,
+            connectivity: connectivity_ms,
+            refine: refine_ms,
+            total: ms(t0),
+        },
+    }
+}
+
+/// The distance to the farthest grid neighbour: an edge walk has no business beyond it (it would
+/// stop at the neighbour anyway, where the edge changes polarity).
+fn neighbour_reach(corners: &[Corner], neighbours: &[Option<usize>; 4], i: usize) -> Option<f64> {
+    let c = &corners[i];
+    neighbours
+        .iter()
+        .flatten()
+        .map(|&j| (corners[j].x - c.x).hypot(corners[j].y - c.y))
+        .max_by(f64::total_cmp)
+}
+
+fn refine_corner(
+    image: &GrayImage,
+    c: &Corner,
+    row: i32,
+    col: i32,
+    reach: Option<f64>,
+    params: &RefineParams,
+) -> DetectedCorner {
+    let params = RefineParams {
+        reach: reach.map_or(params.reach, |r| r.clamp(5.0, params.reach)),
+        ..params.clone()
+    };
+    let r = refine_one(image, [c.x, c.y], &params);
+    DetectedCorner {
+        x: r.x,
+        y: r.y,
+        row,
+        col,
+        score: c.score,
+        status: r.status,
+        residual: r.residual,
+    }
+}
