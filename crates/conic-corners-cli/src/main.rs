@@ -8,6 +8,8 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+mod detect_cmd;
+mod draw;
 mod synth_cmd;
 
 #[derive(Parser)]
@@ -19,6 +21,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Find checkerboard-like boards, label every corner with its (row, col) and refine it.
+    ///
+    /// Prints one JSON object per image (one per line). Coordinates: x right, y down, the centre
+    /// of the top-left pixel is (0, 0).
+    Detect(detect_cmd::DetectArgs),
     /// Refine approximate corner positions to subpixel accuracy (a drop-in for cornerSubPix).
     ///
     /// Coordinates: x right, y down, the centre of the top-left pixel is (0, 0).
@@ -68,7 +75,7 @@ impl RefineOptions {
     }
 }
 
-fn parse_point(s: &str) -> Result<[f64; 2], String> {
+pub fn parse_point(s: &str) -> Result<[f64; 2], String> {
     let mut it = s.split(',').map(|v| v.trim().parse::<f64>());
     match (it.next(), it.next(), it.next()) {
         (Some(Ok(x)), Some(Ok(y)), None) if x.is_finite() && y.is_finite() => Ok([x, y]),
@@ -141,6 +148,7 @@ pub fn print_json(value: &impl Serialize) -> Result<(), String> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Detect(args) => detect_cmd::run(args),
         Command::Refine(args) => run_refine(args),
         Command::Synth(args) => synth_cmd::run(args),
     };
