@@ -757,14 +757,21 @@ impl BoardGeometry {
     }
 
     /// Signed curvature (px⁻¹) of the image of the sheet line through `p` along `dir` (unit, in
-    /// the sheet), by central differences with steps of `h` mm.
+    /// the sheet): first and second derivatives by central differences with steps `h` and `h/2`
+    /// (mm), combined by Richardson extrapolation (`(4D(h/2) − D(h))/3`, error `O(h⁴)`).
     fn line_curvature(&self, p: [f64; 2], dir: [f64; 2], h: f64) -> f64 {
         let at = |k: f64| self.sheet_to_image([p[0] + k * h * dir[0], p[1] + k * h * dir[1]]);
-        let (Some(a), Some(b), Some(c)) = (at(-1.0), at(0.0), at(1.0)) else {
+        let (Some(a), Some(b), Some(c), Some(d), Some(e)) =
+            (at(-1.0), at(-0.5), at(0.0), at(0.5), at(1.0))
+        else {
             return f64::NAN;
         };
-        let d1 = [(c[0] - a[0]) / (2.0 * h), (c[1] - a[1]) / (2.0 * h)];
-        let d2 = [0, 1].map(|r| (c[r] - 2.0 * b[r] + a[r]) / (h * h));
+        let d1 = [0, 1].map(|r| (4.0 * (d[r] - b[r]) / h - (e[r] - a[r]) / (2.0 * h)) / 3.0);
+        let d2 = [0, 1].map(|r| {
+            let fine = (d[r] - 2.0 * c[r] + b[r]) * 4.0 / (h * h);
+            let coarse = (e[r] - 2.0 * c[r] + a[r]) / (h * h);
+            (4.0 * fine - coarse) / 3.0
+        });
         (d1[0] * d2[1] - d1[1] * d2[0]) / d1[0].hypot(d1[1]).powi(3)
     }
 
@@ -801,7 +808,8 @@ impl BoardGeometry {
             .occluders
             .iter()
             .all(|o| o.axis_distance(x, y) > 0.5 * o.width + OCCLUSION_CLEARANCE);
-        // Steps of about 2 px keep rounding (~10⁻¹³ px) and truncation (~(2/R)² relative) tiny.
+        // Steps of about 2 px: rounding (~10⁻¹² px⁻¹) and truncation (~(2/R)⁴ relative, R the
+        // radius of curvature in px) both stay negligible.
         let h = 2.0 * p[2] / cam.fx.max(cam.fy);
         BoardCorner {
             row,
@@ -1150,4 +1158,669 @@ pub fn random_board_scene<R: Rng + ?Sized>(
         }
     }
     best.expect("at least one pose drawn").1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small_camera() -> PinholeCamera {
+        PinholeCamera {
+            width: 640,
+            height: 480,
+            fx: 800.0,
+            fy: 800.0,
+            cx: 319.5,
+            cy: 239.5,
+            k1: 0.0,
+            k2: 0.0,
+        }
+    }
+
+    fn small_scene(surface: Surface, pose: Isometry3<f64>) -> BoardScene {
+        BoardScene {
+            rows: 5,
+            cols: 7,
+            square_mm: 10.0,
+            margin_mm: 10.0,
+            surface,
+            camera: small_camera(),
+            pose,
+            ..BoardScene::default()
+        }
+    }
+
+    fn tilted(axis: [f64; 3], deg: f64, t: [f64; 3]) -> Isometry3<f64> {
+        let axis = Unit::new_normalize(Vector3::new(axis[0], axis[1], axis[2]));
+        Isometry3::from_parts(
+            Translation3::new(t[0], t[1], t[2]),
+            UnitQuaternion::from_axis_angle(&axis, deg.to_radians()),
+        )
+    }
+
+    /// Bilinear value of `img` at `(x, y)`.
+    fn bilinear(img: &GrayImage, x: f64, y: f64) -> f64 {
+        let (x0, y0) = (x.floor(), y.floor());
+        let (tx, ty) = (x - x0, y - y0);
+        let (i, j) = (x0 as usize, y0 as usize);
+        let g = |a: usize, b: usize| img.get(a, b) as f64;
+        (1.0 - ty) * ((1.0 - tx) * g(i, j) + tx * g(i + 1, j))
+            + ty * ((1.0 - tx) * g(i, j + 1) + tx * g(i + 1, j + 1))
+    }
+
+    #[test]
+    fn flat_fronto_parallel_board_is_an_exact_grid_with_the_right_colours() {
+        let scene = BoardScene {
+            lighting_gradient: [0.3, -0.2],
+            ..small_scene(Surface::Flat, Isometry3::translation(3.0, -2.0, 400.0))
+        };
+        let g = scene.geometry().unwrap();
+        for c in g.corners() {
+            let u = (c.col + 1) as f64 * 10.0 - 40.0;
+            let v = (c.row + 1) as f64 * 10.0 - 30.0;
+            assert!((c.x - (319.5 + 2.0 * (u + 3.0))).abs() < 1e-9, "{c:?}");
+            assert!((c.y - (239.5 + 2.0 * (v - 2.0))).abs() < 1e-9, "{c:?}");
+            assert!(c.visible);
+            assert!(c.curvature.iter().all(|k| k.abs() < 1e-9), "{c:?}");
+        }
+        // Square centres (20 px squares) are pure colours times the lighting gain.
+        let img = scene.render_sharp().unwrap();
+        let gain = |x: usize, y: usize| {
+            1.0 + 0.3 * (x as f64 - 319.5) / 640.0 - 0.2 * (y as f64 - 239.5) / 480.0
+        };
+        let at = |p: [f64; 2]| {
+            let q = g.sheet_to_image(p).unwrap();
+            let (x, y) = (q[0].round() as usize, q[1].round() as usize);
+            img.get(x, y) as f64 / gain(x, y)
+        };
+        for j in 0..6 {
+            for i in 0..8 {
+                let p = [
+                    (i as f64 + 0.5) * 10.0 - 40.0,
+                    (j as f64 + 0.5) * 10.0 - 30.0,
+                ];
+                let want = if (i + j) % 2 == 0 { 0.1 } else { 0.9 };
+                assert!((at(p) - want).abs() < 1e-6, "square ({i}, {j})");
+            }
+        }
+        // Margin is white, beyond it the background.
+        assert!((at([-45.0, 0.0]) - 0.9).abs() < 1e-6);
+        assert!((at([0.0, 35.0]) - 0.9).abs() < 1e-6);
+        assert!((at([0.0, 55.0]) - 0.5).abs() < 1e-6);
+        assert!((img.get(0, 0) as f64 / gain(0, 0) - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn dots_take_the_opposite_colour_at_square_centres() {
+        let scene = BoardScene {
+            dots: Some(Dots {
+                radius: 0.25,
+                fraction: 0.5,
+                seed: 9,
+            }),
+            ..small_scene(Surface::Flat, Isometry3::translation(0.0, 0.0, 400.0))
+        };
+        let g = scene.geometry().unwrap();
+        let img = scene.render_sharp().unwrap();
+        let at = |p: [f64; 2]| {
+            let q = g.sheet_to_image(p).unwrap();
+            img.get(q[0].round() as usize, q[1].round() as usize) as f64
+        };
+        let mut dots = 0;
+        for j in 0..6 {
+            for i in 0..8 {
+                let centre = [
+                    (i as f64 + 0.5) * 10.0 - 40.0,
+                    (j as f64 + 0.5) * 10.0 - 30.0,
+                ];
+                let square = if (i + j) % 2 == 0 { 0.1 } else { 0.9 };
+                // 0.4 of a side from the centre is outside a 0.25-side dot.
+                assert!((at([centre[0] + 4.0, centre[1]]) - square).abs() < 1e-6);
+                let has = g.dot_cells[j * 8 + i];
+                let want = if has { 1.0 - square } else { square };
+                assert!((at(centre) - want).abs() < 1e-6, "square ({i}, {j})");
+                dots += has as usize;
+            }
+        }
+        assert!(dots > 8 && dots < 40, "{dots}");
+        // The pattern follows the seed.
+        let other = BoardScene {
+            dots: Some(Dots {
+                seed: 10,
+                ..scene.dots.unwrap()
+            }),
+            ..scene.clone()
+        };
+        assert_ne!(other.geometry().unwrap().dot_cells, g.dot_cells);
+        assert_eq!(scene.geometry().unwrap().dot_cells, g.dot_cells);
+    }
+
+    /// For every visible corner, the blurred image is at mid-grey on the four edges leaving it, at
+    /// 0.3 and 0.5 of a square from it: the rendered edges cross at the truth.
+    fn check_edges_cross_at_truth(scene: &BoardScene) -> usize {
+        let scene = BoardScene {
+            blur: 1.2,
+            ..scene.clone()
+        };
+        let r = scene.render(0).unwrap();
+        let g = scene.geometry().unwrap();
+        let (mid, contrast) = (0.5 * (scene.black + scene.white), scene.white - scene.black);
+        let (w, h) = (scene.camera.width as f64, scene.camera.height as f64);
+        let mut checked = 0;
+        let mut worst = 0.0f64;
+        for c in r.corners.iter().filter(|c| c.visible) {
+            let p = g.corner_sheet(c.row, c.col);
+            for dir in [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]] {
+                for f in [0.3, 0.5] {
+                    let d = f * scene.square_mm;
+                    let q = [p[0] + d * dir[0], p[1] + d * dir[1]];
+                    let x = g.sheet_to_image(q).unwrap();
+                    // Only edge points seen head-on enough to be 4σ from everything else.
+                    let back = g.image_to_sheet(x);
+                    let seen =
+                        back.is_some_and(|b| (b[0] - q[0]).abs() + (b[1] - q[1]).abs() < 1e-6);
+                    let dist = (x[0] - c.x).hypot(x[1] - c.y);
+                    if !seen
+                        || dist < 5.0
+                        || x[0] < 8.0
+                        || x[1] < 8.0
+                        || x[0] > w - 9.0
+                        || x[1] > h - 9.0
+                    {
+                        continue;
+                    }
+                    let v = bilinear(&r.clean, x[0], x[1]);
+                    worst = worst.max((v - mid).abs() / contrast);
+                    checked += 1;
+                }
+            }
+        }
+        assert!(worst < 0.02, "worst deviation {worst} of the contrast");
+        checked
+    }
+
+    #[test]
+    fn rendered_edges_cross_at_the_truth_on_flat_and_curved_boards() {
+        let flat = small_scene(
+            Surface::Flat,
+            tilted([1.0, 0.3, 0.0], 35.0, [5.0, 8.0, 300.0]),
+        );
+        assert!(check_edges_cross_at_truth(&flat) > 100);
+        let cyl = small_scene(
+            Surface::Cylinder { radius_mm: 40.0 },
+            tilted([0.2, 1.0, 0.1], 20.0, [0.0, -5.0, 280.0]),
+        );
+        assert!(check_edges_cross_at_truth(&cyl) > 100);
+        let ell = small_scene(
+            Surface::EllipticColumn {
+                a_mm: 50.0,
+                b_mm: 30.0,
+            },
+            tilted([1.0, 0.0, 0.3], -25.0, [-6.0, 0.0, 300.0]),
+        );
+        assert!(check_edges_cross_at_truth(&ell) > 100);
+        let s = small_scene(
+            Surface::SShape { radius_mm: 35.0 },
+            tilted([0.0, 1.0, 0.0], 15.0, [0.0, 0.0, 300.0]),
+        );
+        assert!(check_edges_cross_at_truth(&s) > 100);
+        let distorted = BoardScene {
+            camera: PinholeCamera {
+                k1: -0.25,
+                k2: 0.08,
+                ..small_camera()
+            },
+            ..small_scene(
+                Surface::Cylinder { radius_mm: -60.0 },
+                tilted([1.0, 1.0, 0.0], 20.0, [10.0, 0.0, 250.0]),
+            )
+        };
+        assert!(check_edges_cross_at_truth(&distorted) > 100);
+    }
+
+    #[test]
+    fn cylinder_columns_follow_the_analytic_projection_and_curvature() {
+        // Fronto-parallel cylinder, axis vertical, 500 mm from the camera: u = Rθ maps to
+        // x = c + f R sinθ / (D + R(1 − cosθ)), y = c + f v / (D + R(1 − cosθ)).
+        let (r, d, f) = (100.0, 500.0, 800.0);
+        let scene = BoardScene {
+            cols: 9,
+            square_mm: 15.0,
+            ..small_scene(
+                Surface::Cylinder { radius_mm: r },
+                Isometry3::translation(0.0, 0.0, d),
+            )
+        };
+        let corners = scene.corners().unwrap();
+        for c in &corners {
+            let u = (c.col + 1) as f64 * 15.0 - 75.0;
+            let v = (c.row + 1) as f64 * 15.0 - 45.0;
+            let th = u / r;
+            let depth = d + r * (1.0 - th.cos());
+            assert!(
+                (c.x - (319.5 + f * r * th.sin() / depth)).abs() < 1e-9,
+                "{c:?}"
+            );
+            assert!((c.y - (239.5 + f * v / depth)).abs() < 1e-9, "{c:?}");
+            // Columns run along the axis: straight lines. Rows bend by −Y/(f R) at θ = 0.
+            assert!(c.curvature[1].abs() < 1e-9, "{c:?}");
+            if c.col == 4 {
+                let want = -v / (f * r);
+                assert!(
+                    (c.curvature[0] - want).abs() < 1e-6 * want.abs().max(1e-4),
+                    "{c:?} {want}"
+                );
+            }
+            if v != 0.0 {
+                assert!(c.curvature[0].abs() > 1e-4, "{c:?}");
+            }
+        }
+        // Column spacing shrinks towards the limbs, symmetrically.
+        let xs: Vec<f64> = corners.iter().filter(|c| c.row == 2).map(|c| c.x).collect();
+        let gaps: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).collect();
+        for i in 0..3 {
+            assert!(
+                gaps[i] < gaps[i + 1] && gaps[7 - i] < gaps[6 - i],
+                "{gaps:?}"
+            );
+        }
+        for i in 0..4 {
+            assert!((gaps[i] - gaps[7 - i]).abs() < 1e-9);
+        }
+        // A circular elliptic column is the same cylinder (numerical arc length).
+        let ell = BoardScene {
+            surface: Surface::EllipticColumn { a_mm: r, b_mm: r },
+            ..scene.clone()
+        };
+        for (a, b) in ell.corners().unwrap().iter().zip(&corners) {
+            assert!(
+                (a.x - b.x).abs() < 1e-8 && (a.y - b.y).abs() < 1e-8,
+                "{a:?} {b:?}"
+            );
+        }
+        let (ia, ib) = (ell.render_sharp().unwrap(), scene.render_sharp().unwrap());
+        let diff: f64 = ia
+            .data()
+            .iter()
+            .zip(ib.data())
+            .map(|(p, q)| (p - q).abs() as f64)
+            .sum();
+        assert!(diff / (ia.data().len() as f64) < 1e-4, "{diff}");
+    }
+
+    #[test]
+    fn s_shape_bends_rows_both_ways() {
+        let scene = small_scene(
+            Surface::SShape { radius_mm: 50.0 },
+            Isometry3::translation(0.0, 0.0, 400.0),
+        );
+        let corners = scene.corners().unwrap();
+        // Top row (v = −20 mm, above the eye): convex half (u > 0) turns clockwise, concave
+        // half (u < 0) anticlockwise, each about ∓Y/(fR) near the inflection.
+        let top: Vec<&BoardCorner> = corners.iter().filter(|c| c.row == 0).collect();
+        let k = 20.0 / (800.0 * 50.0);
+        assert!((top[4].curvature[0] - k).abs() < 0.1 * k, "{:?}", top[4]);
+        assert!((top[2].curvature[0] + k).abs() < 0.1 * k, "{:?}", top[2]);
+        assert!(top.iter().all(|c| c.visible));
+    }
+
+    #[test]
+    fn corners_out_of_view_on_the_limbs_or_under_a_pen_are_hidden() {
+        // Board partly outside the image.
+        let scene = small_scene(Surface::Flat, Isometry3::translation(-130.0, 95.0, 400.0));
+        let corners = scene.corners().unwrap();
+        for c in &corners {
+            let inside = (5.0..=634.0).contains(&c.x) && (5.0..=474.0).contains(&c.y);
+            assert_eq!(c.visible, inside, "{c:?}");
+        }
+        assert!(corners.iter().any(|c| c.visible) && corners.iter().any(|c| !c.visible));
+
+        // A small cylinder: the view angle exceeds 75° towards the limbs.
+        let (r, d) = (50.0, 300.0);
+        let scene = BoardScene {
+            cols: 15,
+            ..small_scene(
+                Surface::Cylinder { radius_mm: r },
+                Isometry3::translation(0.0, 0.0, d),
+            )
+        };
+        let corners = scene.corners().unwrap();
+        let limit = 75f64.to_radians().cos();
+        let mut hidden = 0;
+        for c in &corners {
+            let th = ((c.col + 1) as f64 * 10.0 - 80.0) / r;
+            let v = (c.row + 1) as f64 * 10.0 - 30.0;
+            let p = [r * th.sin(), v, d + r * (1.0 - th.cos())];
+            let cos_view =
+                ((d + r) * th.cos() - r) / (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            assert_eq!(c.visible, cos_view > limit, "{c:?} {cos_view}");
+            hidden += !c.visible as usize;
+        }
+        assert_eq!(hidden, 4 * 5, "two columns on each side");
+
+        // A pen across the board hides the corners within its half width + 3 px.
+        let pen = Occluder {
+            from: [100.0, 150.0],
+            to: [500.0, 330.0],
+            width: 12.0,
+            intensity: 0.3,
+        };
+        let scene = BoardScene {
+            occluders: vec![pen],
+            ..small_scene(Surface::Flat, Isometry3::translation(0.0, 0.0, 400.0))
+        };
+        let corners = scene.corners().unwrap();
+        let mut under = 0;
+        for c in &corners {
+            let dist = pen.axis_distance(c.x, c.y);
+            assert_eq!(c.visible, dist > 9.0, "{c:?} {dist}");
+            under += (dist <= 9.0) as usize;
+        }
+        assert!(under >= 4, "{under}");
+        let img = scene.render_sharp().unwrap();
+        assert!((img.get(300, 240) - 0.3).abs() < 1e-6);
+        // Half-covered pixels on the bar's edge are mixtures.
+        let edge = img.get(300, 246);
+        assert!(edge > 0.1 && edge < 0.9 && edge != 0.3, "{edge}");
+    }
+
+    #[test]
+    fn sheet_and_image_round_trip_through_distortion() {
+        let scene = BoardScene {
+            camera: PinholeCamera {
+                k1: -0.3,
+                k2: 0.1,
+                ..small_camera()
+            },
+            ..small_scene(
+                Surface::EllipticColumn {
+                    a_mm: 60.0,
+                    b_mm: 90.0,
+                },
+                tilted([0.3, 1.0, 0.2], 30.0, [20.0, -10.0, 260.0]),
+            )
+        };
+        let g = scene.geometry().unwrap();
+        let mut n = 0;
+        for c in g.corners().iter().filter(|c| c.visible) {
+            let back = g.image_to_sheet([c.x, c.y]).unwrap();
+            let want = g.corner_sheet(c.row, c.col);
+            assert!((back[0] - want[0]).abs() < 1e-7 && (back[1] - want[1]).abs() < 1e-7);
+            n += 1;
+        }
+        assert!(n > 20, "{n}");
+        // Distortion bends a flat board's lines: for the fronto-parallel row y_n = Y through the
+        // principal point's column, x = f t d, y = f Y d with d = 1 + k₁q + k₂q², q = t² + Y², so at
+        // t = 0: κ = y″/x′² = Y (2k₁ + 4k₂Y²) / (f d²). The column x_n = 0 is radial: straight.
+        let (k1, k2, f, depth) = (-0.3, 0.1, 800.0, 150.0);
+        let flat = BoardScene {
+            camera: scene.camera,
+            ..small_scene(Surface::Flat, Isometry3::translation(0.0, 0.0, depth))
+        };
+        for c in flat.corners().unwrap().iter().filter(|c| c.col == 3) {
+            let y = ((c.row + 1) as f64 * 10.0 - 30.0) / depth;
+            let d = 1.0 + k1 * y * y + k2 * y.powi(4);
+            let want = y * (2.0 * k1 + 4.0 * k2 * y * y) / (f * d * d);
+            assert!((c.curvature[0] - want).abs() < 1e-9, "{c:?} {want}");
+            assert!(c.curvature[1].abs() < 1e-9, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn renders_are_deterministic_per_seed() {
+        let scene = BoardScene {
+            blur: 1.0,
+            noise: 0.03,
+            dots: Some(Dots {
+                radius: 0.2,
+                fraction: 0.4,
+                seed: 1,
+            }),
+            ..small_scene(
+                Surface::Cylinder { radius_mm: 60.0 },
+                tilted([1.0, 0.0, 0.0], 20.0, [0.0, 0.0, 300.0]),
+            )
+        };
+        let a = scene.render(5).unwrap();
+        let b = scene.render(5).unwrap();
+        let c = scene.render(6).unwrap();
+        assert_eq!(a.image, b.image);
+        assert_eq!(a.corners, b.corners);
+        assert_eq!(a.clean, c.clean);
+        assert_ne!(a.image, c.image);
+        let n = a.image.data().len() as f64;
+        let rms = (a
+            .image
+            .data()
+            .iter()
+            .zip(c.clean.data())
+            .map(|(p, q)| ((p - q) as f64).powi(2))
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        assert!((rms - 0.03).abs() < 0.001, "{rms}");
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let s1 = random_board_scene(&mut rng, Surface::Flat, &scene);
+        let s2 = random_board_scene(&mut ChaCha8Rng::seed_from_u64(3), Surface::Flat, &scene);
+        assert_eq!(s1, s2);
+    }
+
+    #[test]
+    fn random_scenes_show_most_of_the_board() {
+        let template = BoardScene {
+            rows: 9,
+            cols: 9,
+            ..small_scene(Surface::Flat, Isometry3::identity())
+        };
+        let surfaces = [
+            Surface::Flat,
+            Surface::Cylinder { radius_mm: 80.0 },
+            Surface::EllipticColumn {
+                a_mm: 70.0,
+                b_mm: 120.0,
+            },
+            Surface::SShape { radius_mm: 90.0 },
+        ];
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        for surface in surfaces {
+            for _ in 0..8 {
+                let scene = random_board_scene(&mut rng, surface, &template);
+                let corners = scene.corners().unwrap();
+                let seen: Vec<&BoardCorner> = corners.iter().filter(|c| c.visible).collect();
+                assert!(seen.len() >= 70, "{surface:?}: {} of 81", seen.len());
+                let (lo, hi) = seen.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
+                    (lo.min(c.x), hi.max(c.x))
+                });
+                let span = (hi - lo) / 640.0;
+                assert!(span > 0.1 && span < 0.95, "{surface:?}: span {span}");
+                let tilt = scene.pose.rotation.angle();
+                assert!(tilt < 60f64.to_radians(), "{tilt}");
+            }
+        }
+    }
+
+    #[test]
+    fn bad_parameters_are_rejected() {
+        let ok = small_scene(Surface::Flat, Isometry3::translation(0.0, 0.0, 400.0));
+        assert!(ok.validate().is_ok());
+        let cam = |f: fn(&mut PinholeCamera)| {
+            let mut c = small_camera();
+            f(&mut c);
+            BoardScene {
+                camera: c,
+                ..ok.clone()
+            }
+        };
+        let bad = [
+            BoardScene {
+                rows: 0,
+                ..ok.clone()
+            },
+            BoardScene {
+                cols: 5000,
+                ..ok.clone()
+            },
+            BoardScene {
+                square_mm: 0.0,
+                ..ok.clone()
+            },
+            BoardScene {
+                margin_mm: -1.0,
+                ..ok.clone()
+            },
+            BoardScene {
+                surface: Surface::Cylinder { radius_mm: 0.0 },
+                ..ok.clone()
+            },
+            // 50 mm of sheet each side on a 15 mm cylinder wraps more than half way.
+            BoardScene {
+                surface: Surface::Cylinder { radius_mm: 15.0 },
+                ..ok.clone()
+            },
+            BoardScene {
+                surface: Surface::SShape {
+                    radius_mm: f64::NAN,
+                },
+                ..ok.clone()
+            },
+            BoardScene {
+                surface: Surface::EllipticColumn {
+                    a_mm: 50.0,
+                    b_mm: -1.0,
+                },
+                ..ok.clone()
+            },
+            BoardScene {
+                surface: Surface::EllipticColumn {
+                    a_mm: 20.0,
+                    b_mm: 10.0,
+                },
+                ..ok.clone()
+            },
+            cam(|c| c.width = 0),
+            cam(|c| c.fx = 0.0),
+            cam(|c| c.cy = f64::INFINITY),
+            // r(1 − r²) peaks at r = 0.58: the corners of a 640×480 image at f = 400 lie beyond.
+            cam(|c| {
+                c.fx = 400.0;
+                c.fy = 400.0;
+                c.k1 = -1.0;
+            }),
+            BoardScene {
+                pose: Isometry3::translation(f64::NAN, 0.0, 1.0),
+                ..ok.clone()
+            },
+            BoardScene {
+                dots: Some(Dots {
+                    radius: 0.5,
+                    fraction: 0.5,
+                    seed: 0,
+                }),
+                ..ok.clone()
+            },
+            BoardScene {
+                dots: Some(Dots {
+                    radius: 0.2,
+                    fraction: 1.5,
+                    seed: 0,
+                }),
+                ..ok.clone()
+            },
+            BoardScene {
+                black: f64::NAN,
+                ..ok.clone()
+            },
+            BoardScene {
+                lighting_gradient: [1.5, -0.6],
+                ..ok.clone()
+            },
+            BoardScene {
+                blur: -0.1,
+                ..ok.clone()
+            },
+            BoardScene {
+                noise: f64::INFINITY,
+                ..ok.clone()
+            },
+            BoardScene {
+                supersample: 0,
+                ..ok.clone()
+            },
+            BoardScene {
+                occluders: vec![Occluder {
+                    from: [0.0, 0.0],
+                    to: [1.0, 1.0],
+                    width: 0.0,
+                    intensity: 0.0,
+                }],
+                ..ok.clone()
+            },
+        ];
+        for scene in bad {
+            assert!(
+                matches!(scene.render(0), Err(SynthError::InvalidParameter { .. })),
+                "{scene:?}"
+            );
+            assert!(scene.corners().is_err());
+        }
+        // A board behind the camera renders background and reports NaN, invisible corners.
+        let behind = BoardScene {
+            pose: Isometry3::translation(0.0, 0.0, -400.0),
+            ..ok.clone()
+        };
+        let r = behind.render(0).unwrap();
+        assert!(r.image.data().iter().all(|&v| v == 0.5));
+        assert!(r
+            .corners
+            .iter()
+            .all(|c| !c.visible && c.x.is_nan() && c.curvature[0].is_nan()));
+        // Seen edge-on: no crash, nothing visible.
+        let edge_on = BoardScene {
+            pose: tilted([0.0, 1.0, 0.0], 90.0, [0.0, 0.0, 400.0]),
+            ..ok.clone()
+        };
+        assert!(edge_on.corners().unwrap().iter().all(|c| !c.visible));
+        assert!(edge_on.render(0).is_ok());
+    }
+
+    /// Render time of a 1920×1200 board; run with `--ignored --nocapture` in an optimized profile.
+    #[test]
+    #[ignore]
+    fn render_timing() {
+        let template = BoardScene {
+            blur: 1.0,
+            noise: 0.02,
+            dots: Some(Dots {
+                radius: 0.15,
+                fraction: 0.5,
+                seed: 0,
+            }),
+            ..BoardScene::default()
+        };
+        let surfaces = [
+            Surface::Flat,
+            Surface::Cylinder { radius_mm: 150.0 },
+            Surface::EllipticColumn {
+                a_mm: 120.0,
+                b_mm: 200.0,
+            },
+            Surface::SShape { radius_mm: 150.0 },
+        ];
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        for surface in surfaces {
+            for ss in [8, 16] {
+                let scene = BoardScene {
+                    supersample: ss,
+                    ..random_board_scene(&mut rng, surface, &template)
+                };
+                let start = std::time::Instant::now();
+                let n = 3;
+                for seed in 0..n {
+                    std::hint::black_box(scene.render(seed).unwrap());
+                }
+                let ms = start.elapsed().as_secs_f64() * 1e3 / n as f64;
+                println!("{surface:?} supersample {ss}: {ms:.0} ms per 1920×1200 image");
+            }
+        }
+    }
 }
