@@ -399,7 +399,7 @@ impl Shape {
 /// Roots `t` of `A t² + 2B t + C = 0`, ascending, NaN where missing.
 fn quadratic_roots(a: f64, b: f64, c: f64) -> [f64; 2] {
     let disc = b * b - a * c;
-    if !(disc >= 0.0) || a == 0.0 {
+    if disc.is_nan() || disc < 0.0 || a == 0.0 {
         return [f64::NAN; 2];
     }
     // q = −(B + sign(B)√disc) avoids cancellation; the roots are q/A and C/q.
@@ -478,7 +478,8 @@ impl Lens {
         while ru_limit.is_infinite() && lens.distorted_radius(hi) < rd_max && hi < 1e6 {
             hi *= 2.0;
         }
-        if !(lens.distorted_radius(hi) >= rd_max) {
+        let reach = lens.distorted_radius(hi);
+        if reach.is_nan() || reach < rd_max {
             return Err(SynthError::InvalidParameter {
                 name: "k1",
                 value: k1,
@@ -503,7 +504,7 @@ impl Lens {
 
     /// Image position of camera-frame point `p`, and its undistorted normalized radius.
     fn project(&self, p: [f64; 3]) -> Option<([f64; 2], f64)> {
-        if !(p[2] > 0.0) {
+        if p[2].is_nan() || p[2] <= 0.0 {
             return None;
         }
         let c = &self.cam;
@@ -1335,7 +1336,7 @@ mod tests {
                 }
             }
         }
-        assert!(worst < 0.02, "worst deviation {worst} of the contrast");
+        assert!(worst < 0.012, "worst deviation {worst} of the contrast");
         checked
     }
 
