@@ -235,7 +235,12 @@ impl CornerGeometry {
     }
 }
 
-fn check(name: &'static str, value: f64, ok: bool, reason: &'static str) -> Result<(), SynthError> {
+pub(super) fn check(
+    name: &'static str,
+    value: f64,
+    ok: bool,
+    reason: &'static str,
+) -> Result<(), SynthError> {
     if ok && value.is_finite() {
         Ok(())
     } else {
@@ -365,7 +370,7 @@ impl CornerScene {
 /// Two uniform numbers in `[0, 1)` (24 bits each) from SplitMix64 of `key`: a fixed,
 /// platform-independent jitter for sub-sample `key`.
 #[inline]
-fn jitter(key: u64) -> (f64, f64) {
+pub(super) fn jitter(key: u64) -> (f64, f64) {
     let mut z = key.wrapping_add(0x9E37_79B9_7F4A_7C15);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);

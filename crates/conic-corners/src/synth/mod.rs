@@ -2,7 +2,9 @@
 //!
 //! [`corner`] renders the paper's single-corner protocol (section IV-A): an X-junction of two
 //! circular-arc edges on a plane seen by a pinhole camera, area-sampled, blurred and made noisy, with
-//! the corner's image position known exactly. [`Protocol`] holds the paper's four sweeps (noise,
+//! the corner's image position known exactly. [`board`] renders whole checkerboards, flat or bent
+//! around cylinders, elliptic columns and S shapes, with the truth of every inner corner.
+//! [`Protocol`] holds the paper's four sweeps (noise,
 //! blur, perspective, curvature) and [`scene_for`] draws the other factors as the paper does.
 //!
 //! All coordinates are image coordinates: x right, y down, the centre of the top-left pixel at
@@ -11,8 +13,13 @@
 //!
 //! The module is pure: it builds [`GrayImage`]s and never touches files.
 
+pub mod board;
 pub mod corner;
 
+pub use board::{
+    random_board_scene, BoardCorner, BoardGeometry, BoardScene, Dots, Occluder, PinholeCamera,
+    RenderedBoard, Surface,
+};
 pub use corner::{scene_for, CornerGeometry, CornerScene, Protocol, RenderedCorner};
 
 use crate::GrayImage;
