@@ -114,7 +114,7 @@ fn bad_input_gives_a_clear_error_and_nonzero_exit() {
     std::fs::write(&bad, "{\"x\": 1}").unwrap();
     assert_fails(&bin().args(["refine", p, "--points", bad.to_str().unwrap()]).output().unwrap(), "array");
     // Absurd parameters.
-    assert_fails(&bin().args(["refine", p, "--at", "1,1", "--reach", "-3"]).output().unwrap(), "reach");
+    assert_fails(&bin().args(["refine", p, "--at", "1,1", "--reach=-3"]).output().unwrap(), "reach");
     assert_fails(&bin().args(["refine", p, "--at", "1,1", "--stride", "0"]).output().unwrap(), "stride");
     assert_fails(&bin().args(["refine", p, "--at", "1,1", "--blur", "inf"]).output().unwrap(), "blur");
 }
@@ -149,4 +149,105 @@ fn colour_and_sixteen_bit_images_are_read_as_grey() {
         assert_eq!(v["corners"][0]["status"], "converged", "{}", path.display());
         assert!((v["corners"][0]["x"].as_f64().unwrap() - 100.3).abs() < 0.05);
     }
+}
+
+/// A 7×8-corner flat board seen slightly obliquely by an 800×600 camera, as an 8-bit PNG; returns
+/// the visible truth corners.
+fn write_board(path: &Path) -> Vec<conic_corners::synth::board::BoardCorner> {
+    use conic_corners::synth::board::{BoardScene, PinholeCamera};
+    let scene = BoardScene {
+        rows: 7,
+        cols: 8,
+        camera: PinholeCamera {
+            width: 800,
+            height: 600,
+            fx: 700.0,
+            fy: 700.0,
+            cx: 399.5,
+            cy: 299.5,
+            k1: 0.0,
+            k2: 0.0,
+        },
+        pose: nalgebra::Isometry3::new(
+            nalgebra::Vector3::new(10.0, -5.0, 520.0),
+            nalgebra::Vector3::new(0.25, -0.2, 0.1),
+        ),
+        blur: 1.0,
+        noise: 0.01,
+        ..BoardScene::default()
+    };
+    let rendered = scene.render(3).unwrap();
+    rendered.image.to_luma8(0.0, 1.0).save(path).unwrap();
+    rendered.corners.into_iter().filter(|c| c.visible).collect()
+}
+
+#[test]
+fn detect_finds_and_labels_a_rendered_board() {
+    let dir = tmp_dir("detect");
+    let png = dir.join("board.png");
+    let truth = write_board(&png);
+    let overlay = dir.join("overlay.png");
+    let out = bin()
+        .args(["detect", png.to_str().unwrap(), "--draw", overlay.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let v = stdout_json(&out);
+    assert_eq!(v["image"]["width"], 800);
+    let boards = v["boards"].as_array().unwrap();
+    assert_eq!(boards.len(), 1, "{v}");
+    let corners = boards[0]["corners"].as_array().unwrap();
+    assert_eq!(corners.len(), truth.len());
+    for c in corners {
+        let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
+        let err = truth.iter().map(|t| (t.x - x).hypot(t.y - y)).fold(f64::INFINITY, f64::min);
+        assert!(err < 0.1, "corner {c} is {err} px from the truth");
+    }
+    assert!(image::open(&overlay).is_ok());
+    // CSV: a header and one row per corner.
+    let out = bin().args(["detect", png.to_str().unwrap(), "--csv"]).output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.starts_with("image,board,row,col,x,y,score,status\n"));
+    assert_eq!(text.lines().count(), 1 + truth.len());
+}
+
+#[test]
+fn detect_reports_no_board_as_an_empty_list() {
+    let dir = tmp_dir("noboard");
+    let path = dir.join("grey.png");
+    image::GrayImage::from_fn(320, 240, |x, y| image::Luma([((x * 7 + y * 3) % 256) as u8])).save(&path).unwrap();
+    let v = stdout_json(&bin().args(["detect", path.to_str().unwrap()]).output().unwrap());
+    assert_eq!(v["boards"].as_array().unwrap().len(), 0);
+}
+
+#[test]
+fn detect_batch_skips_bad_files_and_fails_at_the_end() {
+    let dir = tmp_dir("batch");
+    let good = dir.join("board.png");
+    write_board(&good);
+    let bad = dir.join("broken.jpg");
+    std::fs::write(&bad, b"\xff\xd8\xff garbage").unwrap();
+    let out = bin()
+        .args(["detect", good.to_str().unwrap(), bad.to_str().unwrap(), good.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(stdout.lines().count(), 2, "the two good images are still reported");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("broken.jpg") && err.contains("1 of 3"), "{err}");
+    assert!(!err.contains("panicked"));
+}
+
+#[test]
+fn detect_rejects_absurd_parameters() {
+    let dir = tmp_dir("detect-params");
+    let good = dir.join("board.png");
+    write_board(&good);
+    let g = good.to_str().unwrap();
+    assert_fails(&bin().args(["detect", g, "--corners", "0"]).output().unwrap(), "--corners");
+    assert_fails(&bin().args(["detect", g, "--corners=-5"]).output().unwrap(), "--corners");
+    assert_fails(&bin().args(["detect", g, "--sigma", "0"]).output().unwrap(), "sigma");
+    assert_fails(&bin().args(["detect", g, g, "--draw", "x.png"]).output().unwrap(), "--draw-dir");
+    assert_fails(&bin().args(["detect", "/no/such.png"]).output().unwrap(), "/no/such.png");
 }
