@@ -137,7 +137,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     {
         return failed;
     }
-    let mut walks = Walks::default();
+    let mut walks = Walks::with_reach(params.reach, params.stride);
     // Pilot: short walks with a generous window measure the blur and a first corner. Each
     // direction estimate is tried in turn until one gives a pilot solution.
     let pilot_sigma = params.blur.unwrap_or(2.0);
@@ -298,11 +298,12 @@ impl WalkConfig {
 }
 
 /// The samples of the four rays of one corner, reused between passes (no allocation per sample).
-#[derive(Default)]
 struct Walks {
     rays: [Vec<EdgeSample>; 4],
     /// Scratch buffer of points handed to the curve fit.
     points: Vec<[f64; 2]>,
+    /// Scratch buffer of the points' distances to a first fit.
+    distances: Vec<f64>,
 }
 
 struct Solution {
@@ -315,6 +316,18 @@ struct Solution {
 }
 
 impl Walks {
+    /// Buffers sized for the longest walk, so that no sample allocates.
+    fn with_reach(reach: f64, stride: usize) -> Self {
+        // A walk takes at most one sample per scanline, and a ray of length `reach` crosses at
+        // most `reach` scanlines.
+        let per_ray = (reach / stride as f64).ceil() as usize + 2;
+        Self {
+            rays: std::array::from_fn(|_| Vec::with_capacity(per_ray)),
+            points: Vec::with_capacity(2 * per_ray),
+            distances: Vec::with_capacity(2 * per_ray),
+        }
+    }
+
     fn walk_all(&mut self, image: &GrayImage, corner: [f64; 2], dirs: [[f64; 2]; 4], cfg: &WalkConfig) {
         for (k, ray) in self.rays.iter_mut().enumerate() {
             // The other edge: the rays at k ± 1.
@@ -371,7 +384,7 @@ impl Walks {
             }
             self.points.clear();
             self.points.extend(a.iter().chain(b.iter()).map(|s| s.point));
-            let fit = robust_curve_fit(&mut self.points)?;
+            let fit = robust_curve_fit(&mut self.points, &mut self.distances)?;
             sq += fit.1 * fit.1;
             samples += self.points.len();
             lines[e] = fit_line_tls(&self.points, None);
@@ -395,13 +408,15 @@ impl Walks {
     }
 }
 
-/// Fits an edge curve, drops samples farther than 3.5 robust standard deviations (and at least
-/// 0.05 px) from it, and refits. Returns the curve and the RMS distance of the kept samples.
-fn robust_curve_fit(points: &mut Vec<[f64; 2]>) -> Option<(Curve, f64)> {
+/// Fits an edge curve to `points`, drops samples farther than 3.5 robust standard deviations (and
+/// at least 0.05 px) from it, and refits. Returns the curve and the RMS distance of the kept
+/// samples. `distances` is scratch space.
+fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Option<(Curve, f64)> {
     let first = fit_edge_curve(points, None)?;
-    let mut dev: Vec<f64> = points.iter().map(|p| first.curve.distance(p[0], p[1]).abs()).collect();
-    let mid = dev.len() / 2;
-    let mad = *dev.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+    distances.clear();
+    distances.extend(points.iter().map(|p| first.curve.distance(p[0], p[1]).abs()));
+    let mid = distances.len() / 2;
+    let mad = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
     let limit = (3.5 * 1.4826 * mad).max(0.05);
     let before = points.len();
     points.retain(|p| first.curve.distance(p[0], p[1]).abs() <= limit);
