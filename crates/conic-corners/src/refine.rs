@@ -158,7 +158,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     };
     let sigma = params
         .blur
-        .or_else(|| walks.blur_estimate())
+        .or_else(|| walks.blur_estimate(image, &pilot))
         .unwrap_or(pilot_sigma)
         .clamp(0.5, 12.0);
     let full = WalkConfig::measure(sigma, params.reach, params.stride);
@@ -261,16 +261,18 @@ struct WalkConfig {
 }
 
 impl WalkConfig {
-    /// A pilot pass: free sigmoid widths, to measure the blur.
+    /// A pilot pass: sigmoid widths fixed at a middling blur guess for robust tracking (a fit with
+    /// a wrong width still finds the edge to a few hundredths of a pixel); the blur itself is
+    /// measured afterwards by free-width fits at the accepted samples.
     fn pilot(sigma: f64, reach: f64, stride: usize) -> Self {
         Self {
             sigma,
             start: 2.5 * sigma + 3.0,
             reach,
             stride,
-            normal_width: None,
+            normal_width: Some(normal_width(sigma)),
             sigmoid: SigmoidParams {
-                min_contrast_to_noise: 3.0,
+                min_contrast_to_noise: 2.5,
                 ..SigmoidParams::default()
             },
         }
@@ -280,7 +282,7 @@ impl WalkConfig {
     /// floor since each sample must also fall near its predicted position.
     fn measure(sigma: f64, reach: f64, stride: usize) -> Self {
         Self {
-            normal_width: Some((sigma * sigma + 1.0 / 12.0).sqrt() / LOGISTIC_TO_GAUSSIAN),
+            normal_width: Some(normal_width(sigma)),
             sigmoid: SigmoidParams {
                 min_contrast_to_noise: 2.0,
                 ..SigmoidParams::default()
@@ -295,6 +297,11 @@ impl WalkConfig {
         let along = d[0].abs().max(d[1].abs()).max(0.5);
         ((3.0 * self.sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
     }
+}
+
+/// Logistic width across an edge blurred by a Gaussian of `sigma` px and area-sampled by pixels.
+fn normal_width(sigma: f64) -> f64 {
+    (sigma * sigma + 1.0 / 12.0).sqrt() / LOGISTIC_TO_GAUSSIAN
 }
 
 /// The samples of the four rays of one corner, reused between passes (no allocation per sample).
@@ -336,14 +343,20 @@ impl Walks {
         }
     }
 
-    /// Blur σ from the median normal width of all samples.
-    fn blur_estimate(&self) -> Option<f64> {
+    /// Blur σ from the median normal width of free-width sigmoid fits at the samples.
+    fn blur_estimate(&self, image: &GrayImage, cfg: &WalkConfig) -> Option<f64> {
         let dirs = self.directions()?;
+        let free = SigmoidParams::default();
         let widths: Vec<f64> = self
             .rays
             .iter()
             .zip(dirs)
-            .flat_map(|(ray, d)| ray.iter().map(move |s| s.normal_width(d)))
+            .flat_map(|(ray, d)| {
+                ray.iter().filter_map(move |s| {
+                    let hw = cfg.half_width(d) + 2;
+                    sample_edge_with(image, s.point, d, hw, None, &free).map(|f| f.normal_width(d))
+                })
+            })
             .collect();
         if widths.len() < 8 {
             return None;
