@@ -32,6 +32,12 @@ struct Args {
     /// Protocols to run (noise, blur, perspective, curvature); all by default.
     #[arg(long, value_delimiter = ',')]
     protocols: Vec<String>,
+    /// Reach (px) of the refiner's edge walks (default: the library default).
+    #[arg(long)]
+    reach: Option<f64>,
+    /// Scanline stride of the refiner's edge samples (default: the library default).
+    #[arg(long)]
+    stride: Option<usize>,
     /// Half-window (px) of the Cramér–Rao bound.
     #[arg(long, default_value_t = 50)]
     crb_half_window: usize,
@@ -63,7 +69,13 @@ fn main() -> Result<(), String> {
             }
         }
     }
-    let params = RefineParams::default();
+    let defaults = RefineParams::default();
+    let params = RefineParams {
+        reach: args.reach.unwrap_or(defaults.reach),
+        stride: args.stride.unwrap_or(defaults.stride),
+        ..defaults
+    };
+    params.validate()?;
     let results: Vec<(serde_json::Value, Vec<serde_json::Value>)> = jobs
         .par_iter()
         .map(|&(p, v, i, seed)| {
