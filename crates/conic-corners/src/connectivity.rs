@@ -586,7 +586,7 @@ fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> 
                     let (pi, pp) = (pos(i), pos(prev));
                     let v = (pi.0 - pp.0, pi.1 - pp.1);
                     let step = v.0.hypot(v.1);
-                    if !(step > 0.0) {
+                    if step.is_nan() || step <= 0.0 {
                         continue;
                     }
                     for k in 1..=MAX_BRIDGE_STEPS {

@@ -500,7 +500,7 @@ fn saddle_point(image: &GrayImage, x: usize, y: usize) -> Option<(f64, f64)> {
     // [2α β; β 2γ] (u, v)ᵀ = −(δ, ε)ᵀ; a saddle has a negative determinant.
     let det = 4.0 * a * g - b * b;
     let fallback = Some((x as f64, y as f64));
-    if !(det < 0.0) {
+    if det.is_nan() || det >= 0.0 {
         return fallback;
     }
     let u = (-d * 2.0 * g + e * b) / det;

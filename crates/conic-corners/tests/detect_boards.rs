@@ -52,6 +52,9 @@ fn symmetries() -> impl Iterator<Item = impl Fn((i32, i32)) -> (i32, i32)> {
     })
 }
 
+/// A truth label and the detected label of one corner.
+type LabelPair = ((i32, i32), (i32, i32));
+
 struct Outcome {
     missing: usize,
     rms: f64,
@@ -63,7 +66,7 @@ fn check(what: &str, det: &Detection, truth: &[BoardCorner]) -> Outcome {
     let found = detected(det);
     let near = |x: f64, y: f64, t: &BoardCorner| (t.x - x).hypot(t.y - y);
     // No false corner.
-    let mut pairs: Vec<Vec<((i32, i32), (i32, i32))>> = vec![Vec::new(); det.boards.len()];
+    let mut pairs: Vec<Vec<LabelPair>> = vec![Vec::new(); det.boards.len()];
     for &(b, x, y, row, col) in &found {
         let best = truth
             .iter()
@@ -80,7 +83,7 @@ fn check(what: &str, det: &Detection, truth: &[BoardCorner]) -> Outcome {
     // Labels: one symmetry and one shift per board.
     for (b, p) in pairs.iter().enumerate() {
         let ok = symmetries().any(|s| {
-            let shift = |&(t, l): &((i32, i32), (i32, i32))| {
+            let shift = |&(t, l): &LabelPair| {
                 let st = s(t);
                 (l.0 - st.0, l.1 - st.1)
             };
