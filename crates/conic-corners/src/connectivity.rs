@@ -35,13 +35,12 @@
 //!
 //! Consequences: a corner is connected only if it is a corner of at least one grid cell whose four
 //! corners were all detected; a board split by an occluding band yields two components (the
-//! links across the band are longer than the steps beside it and are cut), which [`label`] reports
-//! as two boards. The rule assumes the two orientations of a grid corner are more than
+//! links across the band are longer than the steps beside it and are cut); [`label`] joins the
+//! pieces again when their grids line up across the band (see the labelling rule). The rule assumes the two orientations of a grid corner are more than
 //! `2·theta_edge` apart (so a cell's diagonal can never fall in a ray's cone); corners violating
 //! this, or with non-finite positions or orientations, get no links.
 //!
-//! Limitations: the two parts of a split board are not re-joined (their relative offset is
-//! unknown). A false corner whose orientations match the grid and which lies within about a
+//! Limitations: a false corner whose orientations match the grid and which lies within about a
 //! third of a step of a grid site, or mid-way along a grid line next to another such one, can
 //! stand in for the true corner there or add a spurious half-step row: a detector's non-maximum
 //! suppression and saddle test are expected to have removed those.
@@ -61,6 +60,12 @@
 //! disagrees with the labels (an inconsistent link) is effectively dropped and cannot corrupt the
 //! walk; the rest of the component is reached around it. Components with fewer than
 //! [`LabelParams::min_corners`] corners are dropped.
+//!
+//! **Split boards.** An occluder lying across a board cuts it into components. Their labels (in
+//! canonical orientation, below) differ by a translation when they belong to one board; grid
+//! lines that end at a piece's border are extrapolated across the gap (up to 3 steps) and the
+//! pieces are merged when at least two lines land on the other piece with the same label offset
+//! and agreeing steps (`merge_split_boards`).
 //!
 //! **Canonical orientation.** Let `a` and `b` be the mean unit direction of the rays stepping
 //! `+1` along each of the two walk axes. The axis whose mean direction has the larger `|x|`
@@ -506,13 +511,166 @@ pub fn label_with(corners: &[Corner], graph: &Graph, params: &LabelParams) -> Ve
             boards.push(canonical_board(corners, &members, &labels, &steps));
         }
     }
+    let mut boards = merge_split_boards(corners, boards);
+    sort_boards(&mut boards);
+    boards
+}
+
+/// Largest first, ties by smallest corner index.
+fn sort_boards(boards: &mut [Board]) {
     boards.sort_by(|a: &Board, b: &Board| {
         b.corners.len().cmp(&a.corners.len()).then_with(|| {
             let (ma, mb) = (a.corners.iter().min(), b.corners.iter().min());
             ma.cmp(&mb)
         })
     });
-    boards
+}
+
+/// Most grid steps between two pieces of one board that [`merge_split_boards`] bridges (an
+/// occluder hiding up to two rows or columns of corners).
+const MAX_BRIDGE_STEPS: i32 = 3;
+/// Distinct grid lines that must agree on the label offset before two pieces are merged.
+const MIN_BRIDGE_VOTES: usize = 2;
+/// Tolerance of an extrapolated grid position, in steps: this at one step, plus half of it per
+/// further step (perspective and bending change the step slowly along a line).
+const BRIDGE_TOLERANCE: f64 = 0.25;
+
+/// Joins the pieces of one board that an occluder (a pen lying across it) split into several
+/// components.
+///
+/// At every corner of a board with a labelled predecessor along a grid axis but no successor,
+/// the grid line is extrapolated `k = 1 …` [`MAX_BRIDGE_STEPS`] steps with the last step
+/// `p_i − p_prev`. If a corner of another board lies within the tolerance of a prediction (the
+/// first one that hits anything), and that board's own step there along the same axis agrees with
+/// the extrapolated step (within 30 % of the step), it votes for merging that board with the label
+/// offset that puts the hit corner `k` steps further. Both boards are in canonical orientation,
+/// so pieces of one board differ by a pure translation of labels. A board is merged into another
+/// when at least [`MIN_BRIDGE_VOTES`] grid lines agree and no label would be taken twice;
+/// repeated until nothing changes.
+fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> {
+    const AXES: [(i32, i32); 4] = [(0, 1), (0, -1), (1, 0), (-1, 0)];
+    let pos = |i: usize| (corners[i].x, corners[i].y);
+    loop {
+        sort_boards(&mut boards);
+        let maps: Vec<HashMap<(i32, i32), usize>> = boards
+            .iter()
+            .map(|b| {
+                b.labels
+                    .iter()
+                    .copied()
+                    .zip(b.corners.iter().copied())
+                    .collect()
+            })
+            .collect();
+        let others: Vec<(usize, usize, (i32, i32))> = boards
+            .iter()
+            .enumerate()
+            .flat_map(|(b, bd)| {
+                bd.corners
+                    .iter()
+                    .zip(&bd.labels)
+                    .map(move |(&i, &l)| (b, i, l))
+            })
+            .collect();
+        let mut merge: Option<(usize, usize, (i32, i32))> = None;
+        for (a, board) in boards.iter().enumerate() {
+            let mut votes: HashMap<(usize, (i32, i32)), usize> = HashMap::new();
+            for (&i, &l) in board.corners.iter().zip(&board.labels) {
+                for d in AXES {
+                    if maps[a].contains_key(&(l.0 + d.0, l.1 + d.1)) {
+                        continue;
+                    }
+                    let Some(&prev) = maps[a].get(&(l.0 - d.0, l.1 - d.1)) else {
+                        continue;
+                    };
+                    let (pi, pp) = (pos(i), pos(prev));
+                    let v = (pi.0 - pp.0, pi.1 - pp.1);
+                    let step = v.0.hypot(v.1);
+                    if step.is_nan() || step <= 0.0 {
+                        continue;
+                    }
+                    for k in 1..=MAX_BRIDGE_STEPS {
+                        let q = (pi.0 + k as f64 * v.0, pi.1 + k as f64 * v.1);
+                        let tol = BRIDGE_TOLERANCE * step * (1.0 + 0.5 * (k - 1) as f64);
+                        let hit = others
+                            .iter()
+                            .map(|&(b, j, lj)| {
+                                let pj = pos(j);
+                                ((pj.0 - q.0).hypot(pj.1 - q.1), b, j, lj)
+                            })
+                            .filter(|t| t.0 < tol)
+                            .min_by(|x, y| x.0.total_cmp(&y.0));
+                        let Some((_, b, j, lj)) = hit else {
+                            continue;
+                        };
+                        if b != a {
+                            let pj = pos(j);
+                            let agrees = |w: (f64, f64)| (w.0 - v.0).hypot(w.1 - v.1) < 0.3 * step;
+                            let ahead = maps[b].get(&(lj.0 + d.0, lj.1 + d.1)).is_some_and(|&n| {
+                                let pn = pos(n);
+                                agrees((pn.0 - pj.0, pn.1 - pj.1))
+                            });
+                            let behind = maps[b].get(&(lj.0 - d.0, lj.1 - d.1)).is_some_and(|&n| {
+                                let pn = pos(n);
+                                agrees((pj.0 - pn.0, pj.1 - pn.1))
+                            });
+                            if ahead || behind {
+                                let off = (l.0 + k * d.0 - lj.0, l.1 + k * d.1 - lj.1);
+                                *votes.entry((b, off)).or_default() += 1;
+                            }
+                        }
+                        break;
+                    }
+                }
+            }
+            let mut ranked: Vec<_> = votes.into_iter().collect();
+            ranked.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
+            merge = ranked
+                .into_iter()
+                .filter(|&(_, n)| n >= MIN_BRIDGE_VOTES)
+                .find(|&((b, off), _)| {
+                    boards[b]
+                        .labels
+                        .iter()
+                        .all(|l| !maps[a].contains_key(&(l.0 + off.0, l.1 + off.1)))
+                })
+                .map(|((b, off), _)| (a, b, off));
+            if merge.is_some() {
+                break;
+            }
+        }
+        let Some((a, b, off)) = merge else {
+            return boards;
+        };
+        let piece = boards.swap_remove(b);
+        let a = if a == boards.len() { b } else { a };
+        let mut all: Vec<(i32, i32, usize)> = boards[a]
+            .labels
+            .iter()
+            .zip(&boards[a].corners)
+            .map(|(l, &i)| (l.0, l.1, i))
+            .chain(
+                piece
+                    .labels
+                    .iter()
+                    .zip(&piece.corners)
+                    .map(|(l, &i)| (l.0 + off.0, l.1 + off.1, i)),
+            )
+            .collect();
+        let r0 = all.iter().map(|t| t.0).min().unwrap_or(0);
+        let c0 = all.iter().map(|t| t.1).min().unwrap_or(0);
+        for t in all.iter_mut() {
+            t.0 -= r0;
+            t.1 -= c0;
+        }
+        all.sort_unstable();
+        boards[a] = Board {
+            corners: all.iter().map(|t| t.2).collect(),
+            labels: all.iter().map(|t| (t.0, t.1)).collect(),
+            rows: all.iter().map(|t| t.0 + 1).max().unwrap_or(0) as usize,
+            cols: all.iter().map(|t| t.1 + 1).max().unwrap_or(0) as usize,
+        };
+    }
 }
 
 /// Applies the canonical orientation (module docs) to one walked component.
@@ -938,7 +1096,7 @@ mod tests {
     }
 
     #[test]
-    fn occluding_band_splits_the_board() {
+    fn board_split_by_an_occluding_band_is_merged() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let theta = -0.2;
         let (mut c, mut t) = grid(
@@ -952,10 +1110,10 @@ mod tests {
         remove(&mut c, &mut t, |(r, _)| r == 4);
         let (g, b) = run(&c);
         assert_graph_sane(&g, &t);
-        assert_eq!(b.len(), 2);
-        assert_eq!((b[0].corners.len(), b[1].corners.len()), (50, 40));
+        // The two pieces line up across the band: they are merged back into one board.
+        assert_eq!(b.len(), 1);
+        assert_eq!(b[0].corners.len(), 90);
         assert_exact(&b[0], &t, theta);
-        assert_exact(&b[1], &t, theta);
     }
 
     #[test]

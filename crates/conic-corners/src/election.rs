@@ -28,11 +28,11 @@ pub struct Corner {
 /// Largest half-size accepted by [`edge_orientations`].
 pub const MAX_SURFACE_HALF: usize = 32;
 
-/// Row-major 3×N matrix mapping a (2h+1)² window (row-major, offsets −h..h) to the least-squares
-/// coefficients (α, β, γ) of `αx² + βxy + γy² + δx + εy + ζ`. The design matrix depends only on the
-/// window, so the fit is three dot products per call.
-fn surface_projector(half: usize) -> &'static [Vec<f64>; 3] {
-    static CACHE: OnceLock<Vec<[Vec<f64>; 3]>> = OnceLock::new();
+/// Row-major 5×N matrix mapping a (2h+1)² window (row-major, offsets −h..h) to the least-squares
+/// coefficients (α, β, γ, δ, ε) of `αx² + βxy + γy² + δx + εy + ζ`. The design matrix depends only on the
+/// window, so the fit is a few dot products per call.
+fn surface_projector(half: usize) -> &'static [Vec<f64>; 5] {
+    static CACHE: OnceLock<Vec<[Vec<f64>; 5]>> = OnceLock::new();
     let all = CACHE.get_or_init(|| {
         (0..=MAX_SURFACE_HALF)
             .map(|h| {
@@ -54,7 +54,7 @@ fn surface_projector(half: usize) -> &'static [Vec<f64>; 3] {
                     .try_inverse()
                     .map(|inv| inv * a.transpose())
                     .unwrap_or_else(|| DMatrix::zeros(6, n));
-                [0, 1, 2].map(|k| proj.row(k).iter().copied().collect())
+                [0, 1, 2, 3, 4].map(|k| proj.row(k).iter().copied().collect())
             })
             .collect()
     });
@@ -376,6 +376,147 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// orientations of the winning template (multiples of 2.5°, wrapped to `[0, π)`).
 /// Candidates within 7 px of the border (the template would leave the image) are dropped.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
+    let fine = elect_at_one_scale(image, candidates, params);
+    let Some(stride) = coarse_stride(&fine) else {
+        return fine;
+    };
+    let Some(coarse) = downsample(image, stride) else {
+        return fine;
+    };
+    let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
+    let mut all: Vec<Corner> = elect_at_one_scale(&coarse, &coarse_candidates, params)
+        .into_iter()
+        .filter_map(|c| {
+            let (x, y) = saddle_point(&coarse, c.x as usize, c.y as usize)?;
+            let s = stride as f64;
+            let offset = 0.5 * (s - 1.0);
+            Some(Corner {
+                x: s * x + offset,
+                y: s * y + offset,
+                ..c
+            })
+        })
+        .collect();
+    // A corner found at both scales keeps its fine position (better than a coarse pixel); the
+    // coarse pass only adds the corners the fine one rejected.
+    all.retain(|c| {
+        !fine
+            .iter()
+            .any(|f| (f.x - c.x).hypot(f.y - c.y) < stride as f64 * COARSE_MERGE_PIXELS)
+    });
+    all.extend(fine);
+    all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.y.total_cmp(&b.y)));
+    deduplicate(all, params.min_distance)
+}
+
+/// Coarse pixels within which a coarse-scale corner and a fine-scale one are the same corner.
+const COARSE_MERGE_PIXELS: f64 = 2.5;
+/// The coarse pass makes the 15-px template span about this fraction of the grid step.
+const COARSE_WINDOW_OF_STEP: f64 = 0.75;
+/// Largest stride of the coarse pass.
+const MAX_STRIDE: usize = 16;
+
+/// The stride of the coarse election pass, or `None` if the board's squares are small enough for
+/// the 15-px template. The grid step is the median, over the fine corners, of the distance to the
+/// nearest other fine corner lying along one of the corner's edges (within 15°). The stride makes
+/// the template span [`COARSE_WINDOW_OF_STEP`] of that step.
+///
+/// Why: on large squares the 15-px template sees only the junction itself, where printing defects
+/// (diagonal squares that do not quite touch) and thin pen lines crossing the corner dominate, and
+/// the centre and symmetry tests reject the corner. At the scale of the squares those details are
+/// sub-pixel and the corner is a clean X-junction again, while a thin line no longer matches any
+/// template.
+fn coarse_stride(fine: &[Corner]) -> Option<usize> {
+    let cos_edge = 15f64.to_radians().cos();
+    let mut steps: Vec<f64> = fine
+        .iter()
+        .filter_map(|c| {
+            fine.iter()
+                .filter_map(|o| {
+                    let (dx, dy) = (o.x - c.x, o.y - c.y);
+                    let d = dx.hypot(dy);
+                    let along = c
+                        .angles
+                        .iter()
+                        .any(|a| (dx * a.cos() + dy * a.sin()).abs() >= cos_edge * d);
+                    (d > 0.0 && along).then_some(d)
+                })
+                .min_by(f64::total_cmp)
+        })
+        .collect();
+    if steps.len() < 4 {
+        return None;
+    }
+    let mid = steps.len() / 2;
+    let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let stride = (COARSE_WINDOW_OF_STEP * step / TEMPLATE_SIDE as f64).floor();
+    (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
+}
+
+/// `image` averaged over `stride × stride` blocks (the incomplete last row and column of blocks
+/// dropped): coarse pixel `(X, Y)` has its centre at full-resolution `(sX + (s−1)/2, sY + (s−1)/2)`.
+/// `None` if fewer than 16 × 16 coarse pixels remain.
+fn downsample(image: &GrayImage, stride: usize) -> Option<GrayImage> {
+    let (w, h) = (image.width() / stride, image.height() / stride);
+    if w < 16 || h < 16 {
+        return None;
+    }
+    let mut out = vec![0f32; w * h];
+    let norm = 1.0 / (stride * stride) as f32;
+    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
+        for r in 0..stride {
+            let row = image.row(y * stride + r);
+            for (x, d) in dst.iter_mut().enumerate() {
+                *d += row[x * stride..(x + 1) * stride].iter().sum::<f32>();
+            }
+        }
+        for d in dst.iter_mut() {
+            *d *= norm;
+        }
+    }
+    GrayImage::from_vec(w, h, out).ok()
+}
+
+/// Subpixel saddle point near pixel `(x, y)`: the stationary point of the quadratic surface fitted
+/// on the 5 × 5 window (`∇(αx² + βxy + γy² + δx + εy) = 0`), if it is a saddle within a pixel of
+/// `(x, y)`; otherwise the pixel itself. `None` only if the window leaves the image.
+fn saddle_point(image: &GrayImage, x: usize, y: usize) -> Option<(f64, f64)> {
+    let half = 2;
+    if x < half || y < half || x + half >= image.width() || y + half >= image.height() {
+        return None;
+    }
+    let proj = surface_projector(half);
+    let side = 2 * half + 1;
+    let mut k = [0f64; 5];
+    for r in 0..side {
+        let row = &image.row(y - half + r)[x - half..=x + half];
+        for (c, &v) in row.iter().enumerate() {
+            for (kk, p) in k.iter_mut().zip(proj.iter()) {
+                *kk += p[r * side + c] * v as f64;
+            }
+        }
+    }
+    let [a, b, g, d, e] = k;
+    // [2α β; β 2γ] (u, v)ᵀ = −(δ, ε)ᵀ; a saddle has a negative determinant.
+    let det = 4.0 * a * g - b * b;
+    let fallback = Some((x as f64, y as f64));
+    if det.is_nan() || det >= 0.0 {
+        return fallback;
+    }
+    let u = (-d * 2.0 * g + e * b) / det;
+    let v = (-e * 2.0 * a + d * b) / det;
+    if u.abs() > 1.0 || v.abs() > 1.0 {
+        return fallback;
+    }
+    Some((x as f64 + u, y as f64 + v))
+}
+
+/// [`elect`] at the image's own resolution (the paper's election).
+fn elect_at_one_scale(
+    image: &GrayImage,
+    candidates: &[Candidate],
+    params: &ElectionParams,
+) -> Vec<Corner> {
     let mut scored: Vec<(Corner, f32)> = candidates
         .par_iter()
         .filter_map(|c| {
