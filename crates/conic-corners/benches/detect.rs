@@ -68,8 +68,16 @@ fn bench_detect(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(5));
     for (name, image) in &images {
-        let found: usize = detect(image, &default).boards.iter().map(|b| b.corners.len()).sum();
-        eprintln!("detect bench: {name} {}x{}, {found} corners", image.width(), image.height());
+        let found: usize = detect(image, &default)
+            .boards
+            .iter()
+            .map(|b| b.corners.len())
+            .sum();
+        eprintln!(
+            "detect bench: {name} {}x{}, {found} corners",
+            image.width(),
+            image.height()
+        );
         group.bench_function(*name, |b| {
             b.iter(|| pool.install(|| detect(black_box(image), &default)))
         });
@@ -96,7 +104,11 @@ fn bench_stages(c: &mut Criterion) {
     });
     group.bench_function("nms", |b| {
         b.iter(|| {
-            non_maximum_suppression(black_box(&score), p.prefilter.nms_radius, p.prefilter.nms_tau)
+            non_maximum_suppression(
+                black_box(&score),
+                p.prefilter.nms_radius,
+                p.prefilter.nms_tau,
+            )
         })
     });
     group.bench_function(format!("elect_{}_candidates", candidates.len()), |b| {
