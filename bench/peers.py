@@ -92,7 +92,8 @@ def csp_from_truth(img, truth, half):
     return pts[0, 0].astype(np.float64)
 
 
-def libcbdetect(img, truth):
+def libcbdetect_checkerboard(img):
+    """A libcbdetect Checkerboard holding `img` min-max normalised, or None for a flat image."""
     from libCBDetect import Checkerboard
 
     f = img.astype(np.float64)
@@ -107,14 +108,25 @@ def libcbdetect(img, truth):
     cb.show_debug_image = False
     h, w = f.shape
     cb.array_norm_to_image(np.ascontiguousarray(f.reshape(-1)), h, w)
-    cb.find_corners()
+    return cb
+
+
+def libcbdetect_corners(cb):
+    """(N, 2) corners of `cb` after find_corners() (N may be 0)."""
     n = int(cb.number_of_corners)
-    if n <= 0:
+    u = np.zeros(max(n, 0))
+    v = np.zeros(max(n, 0))
+    if n > 0:
+        cb.get_corners(u, v)
+    return np.stack([u, v], axis=1)
+
+
+def libcbdetect(img, truth):
+    cb = libcbdetect_checkerboard(img)
+    if cb is None:
         return None
-    u = np.zeros(n)
-    v = np.zeros(n)
-    cb.get_corners(u, v)
-    return _nearest(np.stack([u, v], axis=1), truth)
+    cb.find_corners()
+    return _nearest(libcbdetect_corners(cb), truth)
 
 
 _chess_detectors = {}

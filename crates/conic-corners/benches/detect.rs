@@ -1,0 +1,121 @@
+//! Speed of the whole pipeline (`detect`: pre-filter, election, connectivity, refinement) on one
+//! core: `cargo bench -p conic-corners --bench detect`.
+//!
+//! Images:
+//! - `board`: the speed benchmark's 1920×1200 flat 9×9-inner-corner board (the scene of
+//!   `render-board` in `conic-corners-bench`: pose drawn by `random_board_scene` from seed 8,
+//!   blur σ = 1 px, noise 1 %), quantized to 8 bits as its PNG is;
+//! - `curve_6`: the 2248×4000 photo of a bent HydraMarker,
+//!   `../shared/images/curved-hydramarker/curve_6.jpg` from the workspace root (skipped with a
+//!   message when missing).
+//!
+//! Every case runs inside a one-thread rayon pool, so the numbers are single-core whatever
+//! `RAYON_NUM_THREADS` says. Target (issue "Board detection", item 8): ≤ 15 ms on `board`.
+//!
+//! The `stages` group splits the pre-filter of `board` (the Hessian score and the non-maximum
+//! suppression, which `detect`'s stage timings lump together) and times the election on its
+//! candidates: `cargo bench -p conic-corners --bench detect -- stages`.
+
+use conic_corners::detect::{detect, DetectParams};
+use conic_corners::election::elect;
+use conic_corners::prefilter::{hessian_score, non_maximum_suppression, prefilter};
+use conic_corners::synth::{random_board_scene, BoardScene, Surface};
+use conic_corners::GrayImage;
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::path::Path;
+use std::time::Duration;
+
+/// Keep equal to `POSE_SEED` / `NOISE_SEED` of `render-board`.
+const POSE_SEED: u64 = 8;
+const NOISE_SEED: u64 = 8;
+
+fn board_image() -> GrayImage {
+    let template = BoardScene {
+        blur: 1.0,
+        noise: 0.01,
+        ..BoardScene::default()
+    };
+    let scene = random_board_scene(
+        &mut ChaCha8Rng::seed_from_u64(POSE_SEED),
+        Surface::Flat,
+        &template,
+    );
+    let rendered = scene.render(NOISE_SEED).expect("valid scene");
+    // The same pixels as the PNG the peers read.
+    let png = rendered.image.to_luma8(0.0, 1.0);
+    GrayImage::from_slice(png.width() as usize, png.height() as usize, png.as_raw())
+        .expect("non-empty image")
+}
+
+fn bench_detect(c: &mut Criterion) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("one-thread pool");
+    let curve = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/images/curved-hydramarker/curve_6.jpg");
+    let mut images = vec![("board", board_image())];
+    match GrayImage::open(&curve) {
+        Ok(img) => images.push(("curve_6", img)),
+        Err(e) => eprintln!("detect bench: skipping curve_6 ({e})"),
+    }
+    let default = DetectParams::default();
+    let mut group = c.benchmark_group("detect");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5));
+    for (name, image) in &images {
+        let found: usize = detect(image, &default)
+            .boards
+            .iter()
+            .map(|b| b.corners.len())
+            .sum();
+        eprintln!(
+            "detect bench: {name} {}x{}, {found} corners",
+            image.width(),
+            image.height()
+        );
+        group.bench_function(*name, |b| {
+            b.iter(|| pool.install(|| detect(black_box(image), &default)))
+        });
+    }
+    group.finish();
+}
+
+fn bench_stages(c: &mut Criterion) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("one-thread pool");
+    let image = board_image();
+    let p = DetectParams::default();
+    let score = hessian_score(&image, p.prefilter.sigma);
+    let candidates = prefilter(&image, &p.prefilter);
+    let mut group = c.benchmark_group("stages");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3));
+    group.bench_function("hessian_score", |b| {
+        b.iter(|| pool.install(|| hessian_score(black_box(&image), p.prefilter.sigma)))
+    });
+    group.bench_function("nms", |b| {
+        b.iter(|| {
+            non_maximum_suppression(
+                black_box(&score),
+                p.prefilter.nms_radius,
+                p.prefilter.nms_tau,
+            )
+        })
+    });
+    group.bench_function(format!("elect_{}_candidates", candidates.len()), |b| {
+        b.iter(|| pool.install(|| elect(black_box(&image), &candidates, &p.election)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_detect, bench_stages);
+criterion_main!(benches);
