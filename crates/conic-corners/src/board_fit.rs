@@ -65,7 +65,9 @@ pub struct BoardFitParams {
     /// A curve needs at least this many kept samples within `near_squares` squares of a corner
     /// (along the chain) for a board-wide answer.
     pub min_near_samples: usize,
-    /// See `min_near_samples`; a square is the mean distance to the corner's line neighbours.
+    /// See `min_near_samples`. Also the support of each corner's curve fits: the samples of its
+    /// piece within this many squares (px distance) of the corner. A square is the mean distance to
+    /// the corner's line neighbours.
     pub near_squares: f64,
     /// Largest accepted distance (px) between the board-wide and the local answer.
     pub max_shift: f64,
@@ -204,7 +206,11 @@ pub fn fit_board(image: &GrayImage, board: &Board, params: &BoardFitParams) -> V
 }
 
 /// [`fit_board`], also returning every line's samples and fitted pieces (for drawing).
-pub fn fit_board_with_curves(image: &GrayImage, board: &Board, params: &BoardFitParams) -> BoardFit {
+pub fn fit_board_with_curves(
+    image: &GrayImage,
+    board: &Board,
+    params: &BoardFitParams,
+) -> BoardFit {
     let grid = Grid::new(board);
     let sigma = params
         .blur
@@ -213,14 +219,14 @@ pub fn fit_board_with_curves(image: &GrayImage, board: &Board, params: &BoardFit
         .unwrap_or(1.5)
         .clamp(0.5, 12.0);
     let cfg = WalkConfig::new(sigma, params.stride.max(1));
-    let lines: Vec<(FittedLine, Vec<SegmentStats>, Vec<(usize, usize)>)> = grid
+    let lines: Vec<(FittedLine, Vec<(usize, usize)>)> = grid
         .lines
         .par_iter()
         .map(|line| sample_and_fit_line(image, &grid, line, &cfg, params))
         .collect();
     // For each corner, its position in each of its two lines: (line, samples before it).
     let mut slots: Vec<[Option<(usize, usize)>; 2]> = vec![[None, None]; board.corners.len()];
-    for (li, (fl, _, cuts)) in lines.iter().enumerate() {
+    for (li, (fl, cuts)) in lines.iter().enumerate() {
         let k = usize::from(fl.kind == LineKind::Column);
         for &(corner, cut) in cuts {
             slots[corner][k] = Some((li, cut));
@@ -238,8 +244,13 @@ pub fn fit_board_with_curves(image: &GrayImage, board: &Board, params: &BoardFit
             let p = [c.x, c.y];
             let square = grid.square(i);
             let pick = |(li, cut): (usize, usize)| {
-                let (fl, stats, _) = &lines[li];
-                choose_segment(fl, stats, cut, p, square * params.near_squares, params.min_near_samples)
+                choose_segment(
+                    &lines[li].0,
+                    cut,
+                    p,
+                    square * params.near_squares,
+                    params.min_near_samples,
+                )
             };
             match (pick(r), pick(k)) {
                 (Ok(a), Ok(b)) => intersect_corner(c.row, c.col, p, a, b, params),
@@ -254,7 +265,13 @@ pub fn fit_board_with_curves(image: &GrayImage, board: &Board, params: &BoardFit
     }
 }
 
-fn local_corner(row: i32, col: i32, p: [f64; 2], why: Fallback, params: &BoardFitParams) -> FittedCorner {
+fn local_corner(
+    row: i32,
+    col: i32,
+    p: [f64; 2],
+    why: Fallback,
+    params: &BoardFitParams,
+) -> FittedCorner {
     let s = if params.local_sigma.is_finite() && params.local_sigma > 0.0 {
         params.local_sigma
     } else {
@@ -302,7 +319,11 @@ impl Grid {
         let mut lines = Vec::new();
         let mut tangents = vec![[None, None]; points.len()];
         for (k, map) in by.into_iter().enumerate() {
-            let kind = if k == 0 { LineKind::Row } else { LineKind::Column };
+            let kind = if k == 0 {
+                LineKind::Row
+            } else {
+                LineKind::Column
+            };
             let mut keys: Vec<i32> = map.keys().copied().collect();
             keys.sort_unstable();
             for key in keys {
@@ -397,7 +418,10 @@ fn tangent_at(run: &[usize], points: &[[f64; 2]], j: usize) -> Option<[f64; 2]> 
             1 => h1,
             _ => h1 + h2,
         };
-        [f01[0] + f012[0] * (2.0 * t - h1), f01[1] + f012[1] * (2.0 * t - h1)]
+        [
+            f01[0] + f012[0] * (2.0 * t - h1),
+            f01[1] + f012[1] * (2.0 * t - h1),
+        ]
     };
     normalize(d)
 }
@@ -555,7 +579,8 @@ fn walk_edge(
                 d = line_dir;
                 anchor = on_line;
                 let m = recent.len() as f64;
-                tolerance = (4.0 * spread * (m / (m - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+                tolerance =
+                    (4.0 * spread * (m / (m - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
             }
         }
     }
@@ -611,7 +636,9 @@ fn clash_at(grid: &Grid, i: usize, k: usize) -> Option<([f64; 2], [f64; 2])> {
 fn segment_walk(grid: &Grid, a: usize, b: usize, k: usize) -> Option<Walk> {
     let (pa, pb) = (grid.points[a], grid.points[b]);
     let chord = normalize([pb[0] - pa[0], pb[1] - pa[1]])?;
-    let dir = grid.tangents[a][k].filter(|t| t[0] * chord[0] + t[1] * chord[1] > 0.5).unwrap_or(chord);
+    let dir = grid.tangents[a][k]
+        .filter(|t| t[0] * chord[0] + t[1] * chord[1] > 0.5)
+        .unwrap_or(chord);
     // The limit is measured along `dir`; stop the blurred zone short of b.
     let along = (pb[0] - pa[0]) * dir[0] + (pb[1] - pa[1]) * dir[1];
     Some(Walk {
@@ -661,16 +688,15 @@ struct SegmentStats {
     kept: Vec<usize>,
 }
 
-/// Samples one line, segments its chain, fits every piece. Returns the line, the per-piece
-/// statistics (parallel to `segments`, `None` where unfitted folded into `fit: None`) and the
-/// chain position of each corner: `(corner, samples before it)`.
+/// Samples one line, segments its chain, fits every piece (for drawing). Returns the line and
+/// the chain position of each corner: `(corner, samples before it)`.
 fn sample_and_fit_line(
     image: &GrayImage,
     grid: &Grid,
     line: &GridLine,
     cfg: &WalkConfig,
     params: &BoardFitParams,
-) -> (FittedLine, Vec<SegmentStats>, Vec<(usize, usize)>) {
+) -> (FittedLine, Vec<(usize, usize)>) {
     let k = usize::from(line.kind == LineKind::Column);
     let cs = &line.corners;
     let mut pts: Vec<[f64; 2]> = Vec::new();
@@ -699,14 +725,12 @@ fn sample_and_fit_line(
     let ranges = segment_chain(&pts, &params.segmentation);
     let mut scratch = Vec::new();
     let mut segments = Vec::with_capacity(ranges.len());
-    let mut stats = Vec::with_capacity(ranges.len());
     for r in ranges {
         let fitted = robust_fit(&pts, r.clone(), &mut scratch);
         segments.push(FittedSegment {
             samples: (r.start, r.end),
             fit: fitted.as_ref().map(|f| (f.0, f.1, f.2, f.3.kept.len())),
         });
-        stats.push(fitted.map(|f| f.3).unwrap_or_else(SegmentStats::empty));
     }
     (
         FittedLine {
@@ -715,7 +739,6 @@ fn sample_and_fit_line(
             samples: pts,
             segments,
         },
-        stats,
         cuts,
     )
 }
@@ -744,21 +767,10 @@ fn extension_walk(grid: &Grid, e: usize, n: usize, k: usize) -> Option<Walk> {
 }
 
 impl SegmentStats {
-    fn empty() -> Self {
-        SegmentStats {
-            centre: [0.0; 2],
-            tangent: [1.0, 0.0],
-            scale: 1.0,
-            inverse: Matrix5::identity(),
-            degree: 1,
-            s2: f64::INFINITY,
-            kept: Vec::new(),
-        }
-    }
-
     /// Variance (px²) of the curve's position across itself at `p`.
     fn variance_at(&self, p: [f64; 2]) -> f64 {
-        let u = ((p[0] - self.centre[0]) * self.tangent[0] + (p[1] - self.centre[1]) * self.tangent[1])
+        let u = ((p[0] - self.centre[0]) * self.tangent[0]
+            + (p[1] - self.centre[1]) * self.tangent[1])
             / self.scale;
         let phi = basis(u, self.degree);
         self.s2 * (phi.transpose() * self.inverse * phi)[0]
@@ -796,7 +808,10 @@ fn robust_fit(
         scratch.extend(kept.iter().map(|&i| pts[i]));
         let f = fit_edge_curve(scratch, None)?;
         dev.clear();
-        dev.extend(kept.iter().map(|&i| f.curve.distance(pts[i][0], pts[i][1]).abs()));
+        dev.extend(
+            kept.iter()
+                .map(|&i| f.curve.distance(pts[i][0], pts[i][1]).abs()),
+        );
         let mid = dev.len() / 2;
         let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
         let limit = (3.5 * 1.4826 * mad).max(0.05);
@@ -820,7 +835,12 @@ fn robust_fit(
 }
 
 /// The covariance ingredients of a fitted piece; see [`SegmentStats`].
-fn segment_stats(pts: &[[f64; 2]], kept: Vec<usize>, curve: &Curve, model: EdgeModel) -> Option<SegmentStats> {
+fn segment_stats(
+    pts: &[[f64; 2]],
+    kept: Vec<usize>,
+    curve: &Curve,
+    model: EdgeModel,
+) -> Option<SegmentStats> {
     let n = kept.len() as f64;
     let (mut mx, mut my) = (0.0, 0.0);
     for &i in &kept {
@@ -847,7 +867,11 @@ fn segment_stats(pts: &[[f64; 2]], kept: Vec<usize>, curve: &Curve, model: EdgeM
         EdgeModel::Parabola => 2,
         EdgeModel::Conic => 4,
     };
-    let params = if model == EdgeModel::Conic { 5.0 } else { degree as f64 + 1.0 };
+    let params = if model == EdgeModel::Conic {
+        5.0
+    } else {
+        degree as f64 + 1.0
+    };
     let mut gram = Matrix5::zeros();
     let mut rss = 0.0;
     for &i in &kept {
@@ -880,40 +904,46 @@ struct Chosen {
     variance: f64,
 }
 
-/// Picks the piece of a line that holds the corner at chain position `cut` (samples before it):
-/// the piece with samples on both sides of the corner, or else the fitted piece next to it with
-/// the smaller position variance at the corner. It must have at least `min_near` kept samples
-/// within `near` px of `p`.
+/// Picks the piece of a line that holds the corner at chain position `cut` (samples before it)
+/// and fits it near the corner: only the piece's samples within `support` px of `p` enter a
+/// robust fit, so the model need only hold over a few squares (a row wrapped around a cylinder
+/// is one conic in theory, but lens distortion or a long, strongly bent arc are not). The piece
+/// with samples on both sides of the corner wins; otherwise the neighbouring piece whose fit has
+/// the smaller position variance at the corner. The fit must keep at least `min_near` samples.
 fn choose_segment(
     line: &FittedLine,
-    stats: &[SegmentStats],
     cut: usize,
     p: [f64; 2],
-    near: f64,
+    support: f64,
     min_near: usize,
 ) -> Result<Chosen, Fallback> {
-    let candidates = line.segments.iter().zip(stats).filter(|(s, _)| {
+    let candidates = line.segments.iter().filter(|s| {
         let (a, b) = s.samples;
         (a < cut && b > cut) || b == cut || a == cut
     });
     let mut best: Option<(Chosen, bool)> = None;
-    let mut any = false;
-    let mut fitted = false;
-    for (seg, st) in candidates {
-        any = true;
-        let Some((curve, ..)) = seg.fit else {
+    let (mut enough, mut scratch) = (false, Vec::new());
+    for seg in candidates {
+        let (a, b) = seg.samples;
+        let inside = |i: &usize| dist(line.samples[*i], p) <= support;
+        let (Some(lo), Some(hi)) = ((a..b).find(inside), (a..b).rev().find(inside)) else {
             continue;
         };
-        fitted = true;
-        let close = st.kept.iter().filter(|&&i| dist(line.samples[i], p) <= near).count();
-        if close < min_near {
+        if hi + 1 - lo < min_near {
+            continue;
+        }
+        enough = true;
+        let Some((curve, _, _, st)) = robust_fit(&line.samples, lo..hi + 1, &mut scratch) else {
+            continue;
+        };
+        if st.kept.len() < min_near {
             continue;
         }
         let variance = st.variance_at(p);
         if !variance.is_finite() {
             continue;
         }
-        let straddles = seg.samples.0 < cut && seg.samples.1 > cut;
+        let straddles = a < cut && b > cut;
         let better = match &best {
             None => true,
             Some((b, bs)) => (straddles && !bs) || (straddles == *bs && variance < b.variance),
@@ -924,7 +954,7 @@ fn choose_segment(
     }
     match best {
         Some((c, _)) => Ok(c),
-        None if any && !fitted => Err(Fallback::FitFailed),
+        None if enough => Err(Fallback::FitFailed),
         None => Err(Fallback::FewSamples),
     }
 }
@@ -969,10 +999,15 @@ fn intersect_corner(
     let mut cov = [[0.0; 2]; 2];
     for (r, row_c) in cov.iter_mut().enumerate() {
         for (c, v) in row_c.iter_mut().enumerate() {
-            *v = inv[r][0] * inv[c][0] * v1 + inv[r][1] * inv[c][1] * v2 + if r == c { s2 } else { 0.0 };
+            *v = inv[r][0] * inv[c][0] * v1
+                + inv[r][1] * inv[c][1] * v2
+                + if r == c { s2 } else { 0.0 };
         }
     }
-    let (tr, dt) = (cov[0][0] + cov[1][1], cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0]);
+    let (tr, dt) = (
+        cov[0][0] + cov[1][1],
+        cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0],
+    );
     let big = 0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt();
     if !big.is_finite() {
         return fallback(Fallback::FitFailed);
@@ -986,5 +1021,289 @@ fn intersect_corner(
         fallback: None,
         cov,
         sigma: big.sqrt(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::DetectedCorner;
+    use crate::refine::{refine_one, RefineParams, Status};
+    use crate::synth::board::{
+        BoardCorner, BoardScene, Occluder, PinholeCamera, RenderedBoard, Surface,
+    };
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera {
+            width: 960,
+            height: 640,
+            cx: 479.5,
+            cy: 319.5,
+            ..PinholeCamera::default()
+        }
+    }
+
+    /// A 7×9-corner board of 20 mm squares, 600 mm away, turned a little (so no edge is aligned
+    /// with the pixel grid) and tilted by `tilt_deg` about the image x axis.
+    fn scene(surface: Surface, blur: f64, noise: f64, tilt_deg: f64) -> BoardScene {
+        let rot = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt_deg.to_radians())
+            * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 7f64.to_radians());
+        BoardScene {
+            rows: 7,
+            cols: 9,
+            surface,
+            camera: camera(),
+            pose: Isometry3::from_parts(Translation3::new(0.0, 0.0, 600.0), rot),
+            blur,
+            noise,
+            supersample: 8,
+            ..BoardScene::default()
+        }
+    }
+
+    /// A board labelled from the truth, positions perturbed by N(0, 0.2 px) per axis like a local
+    /// refiner's answer.
+    fn board_from_truth(truth: &[BoardCorner], seed: u64) -> Board {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let n = Normal::new(0.0, 0.2).unwrap();
+        let corners: Vec<DetectedCorner> = truth
+            .iter()
+            .filter(|c| c.visible)
+            .map(|c| DetectedCorner {
+                x: c.x + n.sample(&mut rng),
+                y: c.y + n.sample(&mut rng),
+                row: c.row as i32,
+                col: c.col as i32,
+                score: 1.0,
+                status: Status::Converged,
+                residual: None,
+            })
+            .collect();
+        Board {
+            rows: 1 + corners.iter().map(|c| c.row as usize).max().unwrap_or(0),
+            cols: 1 + corners.iter().map(|c| c.col as usize).max().unwrap_or(0),
+            corners,
+        }
+    }
+
+    fn truth_of<'a>(truth: &'a [BoardCorner], c: &FittedCorner) -> &'a BoardCorner {
+        truth
+            .iter()
+            .find(|t| t.row as i32 == c.row && t.col as i32 == c.col)
+            .unwrap()
+    }
+
+    struct Stats {
+        /// (|κ|max, error, per-axis normalized errors) of board-path corners.
+        board: Vec<(f64, f64, [f64; 2])>,
+        local: usize,
+    }
+
+    fn run(r: &RenderedBoard, seed: u64) -> (Board, Vec<FittedCorner>, Stats) {
+        let board = board_from_truth(&r.corners, seed);
+        let fitted = fit_board(&r.image, &board, &BoardFitParams::default());
+        assert_eq!(fitted.len(), board.corners.len());
+        let mut st = Stats {
+            board: Vec::new(),
+            local: 0,
+        };
+        for (f, b) in fitted.iter().zip(&board.corners) {
+            assert_eq!((f.row, f.col), (b.row, b.col));
+            assert!(f.x.is_finite() && f.y.is_finite() && f.sigma.is_finite() && f.sigma > 0.0);
+            let t = truth_of(&r.corners, f);
+            match f.path {
+                Path::Board => {
+                    let e = [f.x - t.x, f.y - t.y];
+                    let k = t.curvature[0].abs().max(t.curvature[1].abs());
+                    st.board.push((
+                        k,
+                        e[0].hypot(e[1]),
+                        [e[0] / f.cov[0][0].sqrt(), e[1] / f.cov[1][1].sqrt()],
+                    ));
+                }
+                Path::Local => st.local += 1,
+            }
+        }
+        (board, fitted, st)
+    }
+
+    fn rms(v: impl Iterator<Item = f64>) -> (f64, usize) {
+        let (s, n) = v.fold((0.0, 0), |(s, n), e| (s + e * e, n + 1));
+        ((s / n.max(1) as f64).sqrt(), n)
+    }
+
+    /// Local refiner's RMS error on the same corners (reach bounded by the square like detect).
+    fn local_rms(
+        r: &RenderedBoard,
+        board: &Board,
+        filter: impl Fn(&BoardCorner) -> bool,
+    ) -> (f64, usize) {
+        let errs: Vec<f64> = board
+            .corners
+            .iter()
+            .filter_map(|c| {
+                let t = r
+                    .corners
+                    .iter()
+                    .find(|t| t.row as i32 == c.row && t.col as i32 == c.col)?;
+                if !filter(t) {
+                    return None;
+                }
+                let p = RefineParams {
+                    reach: 60.0,
+                    ..RefineParams::default()
+                };
+                let q = refine_one(&r.image, [c.x, c.y], &p);
+                (q.status == Status::Converged).then(|| (q.x - t.x).hypot(q.y - t.y))
+            })
+            .collect();
+        rms(errs.into_iter())
+    }
+
+    #[test]
+    fn flat_board_is_accurate() {
+        let r = scene(Surface::Flat, 1.0, 0.008, 20.0).render(1).unwrap();
+        let (_, _, st) = run(&r, 1);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        assert!(n >= 55 && st.local <= 4, "{n} board, {} local", st.local);
+        assert!(e < 0.02, "flat RMS {e}");
+    }
+
+    #[test]
+    fn cylinder_error_does_not_grow_with_curvature() {
+        let r = scene(Surface::Cylinder { radius_mm: 60.0 }, 1.0, 0.008, 15.0)
+            .render(2)
+            .unwrap();
+        let (_, _, st) = run(&r, 2);
+        let (lo, nlo) = rms(st.board.iter().filter(|b| b.0 < 2e-3).map(|b| b.1));
+        let (hi, nhi) = rms(st.board.iter().filter(|b| b.0 >= 6e-3).map(|b| b.1));
+        assert!(nlo >= 5 && nhi >= 5, "{nlo} low, {nhi} high");
+        // Measured: high-curvature corners 0.012 px; the low-curvature ones of this board are the
+        // foreshortened ones near the cylinder's silhouette (0.05 px, a known weakness).
+        assert!(lo < 0.07 && hi < 0.035, "low {lo}, high {hi}");
+    }
+
+    #[test]
+    fn s_shape_is_accurate() {
+        let r = scene(Surface::SShape { radius_mm: 80.0 }, 1.0, 0.008, 10.0)
+            .render(3)
+            .unwrap();
+        let (_, _, st) = run(&r, 3);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        assert!(n >= 40, "{n} board, {} local", st.local);
+        assert!(e < 0.04, "S RMS {e}");
+    }
+
+    #[test]
+    fn occluder_across_edges_does_not_pull_corners() {
+        let mut s = scene(Surface::Cylinder { radius_mm: 100.0 }, 1.0, 0.008, 10.0);
+        s.occluders = vec![
+            Occluder {
+                from: [300.0, 150.0],
+                to: [700.0, 480.0],
+                width: 6.0,
+                intensity: 0.05,
+            },
+            Occluder {
+                from: [380.0, 420.0],
+                to: [420.0, 380.0],
+                width: 3.0,
+                intensity: 0.95,
+            },
+        ];
+        let r = s.render(4).unwrap();
+        let (_, _, st) = run(&r, 4);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        let worst = st.board.iter().map(|b| b.1).fold(0.0, f64::max);
+        assert!(n >= 40, "{n}");
+        assert!(e < 0.03 && worst < 0.1, "RMS {e}, worst {worst}");
+    }
+
+    /// Measures accuracy, coverage of σ and the local refiner on the same images; run with
+    /// `--ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn accuracy_report() {
+        let cases = [
+            ("flat", Surface::Flat),
+            ("cyl200", Surface::Cylinder { radius_mm: 200.0 }),
+            ("cyl60", Surface::Cylinder { radius_mm: 60.0 }),
+            (
+                "ell",
+                Surface::EllipticColumn {
+                    a_mm: 60.0,
+                    b_mm: 90.0,
+                },
+            ),
+            ("S80", Surface::SShape { radius_mm: 80.0 }),
+        ];
+        let mut all_norm = Vec::new();
+        let mut bins = [(0.0, 0usize, 0.0, 0usize); 3];
+        for (name, surface) in cases {
+            for (blur, noise) in [(0.7, 0.0), (1.0, 0.008), (1.2, 0.008)] {
+                for seed in 0..3u64 {
+                    let r = scene(surface, blur, noise, 10.0 + 5.0 * seed as f64)
+                        .render(seed)
+                        .unwrap();
+                    let t0 = std::time::Instant::now();
+                    let (board, _, st) = run(&r, seed);
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let (e, n) = rms(st.board.iter().map(|b| b.1));
+                    let (le, ln) = local_rms(&r, &board, |_| true);
+                    for b in &st.board {
+                        all_norm.extend(b.2);
+                        let k = if b.0 < 2e-3 {
+                            0
+                        } else if b.0 < 6e-3 {
+                            1
+                        } else {
+                            2
+                        };
+                        bins[k].0 += b.1 * b.1;
+                        bins[k].1 += 1;
+                    }
+                    for (k, lo, hi) in [(0, 0.0, 2e-3), (1, 2e-3, 6e-3), (2, 6e-3, 1.0)] {
+                        let (le, ln) = local_rms(&r, &board, |t| {
+                            let c = t.curvature[0].abs().max(t.curvature[1].abs());
+                            c >= lo && c < hi
+                        });
+                        bins[k].2 += le * le * ln as f64;
+                        bins[k].3 += ln;
+                    }
+                    let cover = st
+                        .board
+                        .iter()
+                        .flat_map(|b| b.2)
+                        .filter(|z| z.abs() <= 1.0)
+                        .count() as f64
+                        / (2 * st.board.len()).max(1) as f64;
+                    println!(
+                        "{name} blur {blur} noise {noise} seed {seed}: board {e:.4} px ({n}, {} local), local refiner {le:.4} ({ln}), 1σ cover {cover:.2}, {ms:.1} ms",
+                        st.local
+                    );
+                }
+            }
+        }
+        for (k, b) in bins.iter().enumerate() {
+            println!(
+                "curvature bin {k}: board RMS {:.4} ({}), local RMS {:.4} ({})",
+                (b.0 / b.1.max(1) as f64).sqrt(),
+                b.1,
+                (b.2 / b.3.max(1) as f64).sqrt(),
+                b.3
+            );
+        }
+        let within =
+            all_norm.iter().filter(|z| z.abs() <= 1.0).count() as f64 / all_norm.len() as f64;
+        let within2 =
+            all_norm.iter().filter(|z| z.abs() <= 2.0).count() as f64 / all_norm.len() as f64;
+        println!(
+            "per-axis |error| ≤ 1σ: {within:.3}, ≤ 2σ: {within2:.3} over {}",
+            all_norm.len()
+        );
     }
 }
