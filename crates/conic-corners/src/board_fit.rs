@@ -859,7 +859,7 @@ fn segment_stats(
     let t = [theta.cos(), theta.sin()];
     let var_t = (sxx * t[0] * t[0] + 2.0 * sxy * t[0] * t[1] + syy * t[1] * t[1]) / n;
     let scale = var_t.sqrt();
-    if !(scale > 0.0) {
+    if scale.is_nan() || scale <= 0.0 {
         return None;
     }
     let degree = match model {
@@ -1221,6 +1221,93 @@ mod tests {
         let worst = st.board.iter().map(|b| b.1).fold(0.0, f64::max);
         assert!(n >= 40, "{n}");
         assert!(e < 0.03 && worst < 0.1, "RMS {e}, worst {worst}");
+    }
+
+    #[test]
+    fn degenerate_boards_fall_back_without_panic() {
+        let r = scene(Surface::Flat, 1.0, 0.008, 20.0).render(5).unwrap();
+        let p = BoardFitParams::default();
+        let empty = Board {
+            rows: 0,
+            cols: 0,
+            corners: Vec::new(),
+        };
+        assert!(fit_board(&r.image, &empty, &p).is_empty());
+        let good = board_from_truth(&r.corners, 5);
+        let check = |b: &Board| {
+            let f = fit_board_with_curves(&r.image, b, &p);
+            assert_eq!(f.corners.len(), b.corners.len());
+            for (c, b) in f.corners.iter().zip(&b.corners) {
+                // A local answer is the input position, whatever it is.
+                assert!(c.sigma.is_finite());
+                assert!(
+                    c.x.is_finite() && c.y.is_finite()
+                        || c.path == Path::Local && (c.x, c.y) == (b.x, b.y)
+                        || b.x.is_nan()
+                        || b.y.is_nan()
+                );
+                assert_eq!(c.path == Path::Local, c.fallback.is_some());
+            }
+            f
+        };
+        // A single corner, two corners (one segment, no crossing line), all corners on one point.
+        let one = Board {
+            corners: good.corners[..1].to_vec(),
+            ..good.clone()
+        };
+        assert_eq!(check(&one).corners[0].fallback, Some(Fallback::NoLine));
+        let two = Board {
+            corners: good.corners[..2].to_vec(),
+            ..good.clone()
+        };
+        assert!(check(&two)
+            .corners
+            .iter()
+            .all(|c| c.fallback == Some(Fallback::NoLine)));
+        let mut same = good.clone();
+        for c in &mut same.corners {
+            (c.x, c.y) = (400.0, 300.0);
+        }
+        assert!(check(&same).corners.iter().all(|c| c.path == Path::Local));
+        // Non-finite and off-image corners, duplicate labels.
+        let mut bad = good.clone();
+        bad.corners[3].x = f64::NAN;
+        bad.corners[10].y = 1e9;
+        let dup = bad.corners[20];
+        bad.corners.push(dup);
+        let f = check(&bad);
+        assert_eq!(f.corners[3].fallback, Some(Fallback::NoLine));
+        // A uniform image: no edge anywhere.
+        let flat = GrayImage::from_vec(960, 640, vec![0.5; 960 * 640]).unwrap();
+        let f = fit_board_with_curves(&flat, &good, &p);
+        assert!(f.corners.iter().all(|c| c.path == Path::Local));
+    }
+
+    #[test]
+    fn tangent_and_missing_intersections_fall_back() {
+        use crate::quadratic_form::Line;
+        let p = BoardFitParams::default();
+        let chosen = |l: Line| Chosen {
+            curve: Curve::Line(l),
+            variance: 1e-4,
+        };
+        let h = Line::new(0.0, 1.0, -10.0).unwrap();
+        let nearly = Line::through([0.0, 10.0], [100.0, 11.0]).unwrap();
+        let parallel = Line::new(0.0, 1.0, -12.0).unwrap();
+        let v = Line::new(1.0, 0.0, -5.0).unwrap();
+        let c = intersect_corner(0, 0, [0.5, 10.0], chosen(h), chosen(nearly), &p);
+        assert_eq!(c.fallback, Some(Fallback::Tangent));
+        let c = intersect_corner(0, 0, [5.0, 10.0], chosen(h), chosen(parallel), &p);
+        assert_eq!(c.fallback, Some(Fallback::NoIntersection));
+        let c = intersect_corner(0, 0, [5.0, 13.0], chosen(h), chosen(v), &p);
+        assert_eq!(c.fallback, Some(Fallback::TooFar));
+        let c = intersect_corner(0, 0, [5.2, 10.1], chosen(h), chosen(v), &p);
+        assert_eq!((c.path, c.x, c.y), (Path::Board, 5.0, 10.0));
+        // Perpendicular lines, σ = 0.01 px each, plus σ_sys: cov = (1e-4 + 2.5e-5) I.
+        assert!((c.cov[0][0] - 1.25e-4).abs() < 1e-12 && c.cov[0][1].abs() < 1e-12);
+        // Collinear samples cannot carry a conic: a short piece of three identical points fails.
+        let pts = vec![[1.0, 1.0]; 10];
+        assert!(robust_fit(&pts, 0..10, &mut Vec::new()).is_none());
     }
 
     /// Measures accuracy, coverage of σ and the local refiner on the same images; run with

@@ -80,7 +80,7 @@ fn second_difference_score(points: &[[f64; 2]], out: &mut Vec<f64>) {
 /// `v` convolved with a normalized Gaussian of σ `sigma` samples (truncated at 3σ, renormalized
 /// at the ends).
 fn gaussian_smooth(v: &[f64], sigma: f64) -> Vec<f64> {
-    if !(sigma > 0.0) || v.len() < 2 {
+    if sigma.is_nan() || sigma <= 0.0 || v.len() < 2 {
         return v.to_vec();
     }
     let r = (3.0 * sigma).ceil() as usize;
@@ -140,7 +140,7 @@ pub fn second_difference_splits(points: &[[f64; 2]], params: &SegmentationParams
     let limit = (med + params.jump_relative * 1.4826 * mad).max(params.jump_min);
     let mut i = 1;
     while i < score.len() - 1 {
-        if !(score[i] > limit) {
+        if score[i].is_nan() || score[i] <= limit {
             i += 1;
             continue;
         }
@@ -227,7 +227,7 @@ fn flip_splits(points: &[[f64; 2]], params: &SegmentationParams) -> Vec<usize> {
     let (first, last) = (points[0], points[n - 1]);
     let chord = [last[0] - first[0], last[1] - first[1]];
     let len = chord[0].hypot(chord[1]);
-    if !(len > 0.0) {
+    if len.is_nan() || len <= 0.0 {
         return cuts;
     }
     let left = [-chord[1] / len, chord[0] / len];
