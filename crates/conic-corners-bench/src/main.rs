@@ -84,12 +84,15 @@ fn main() -> Result<(), String> {
             let rendered = scene.render(seed).map_err(|e| e.to_string())?;
             let rel = format!("{}/{v}/{i:04}.png", p.name());
             let path = args.out.join(&rel);
-            std::fs::create_dir_all(path.parent().expect("has parent")).map_err(|e| e.to_string())?;
+            std::fs::create_dir_all(path.parent().expect("has parent"))
+                .map_err(|e| e.to_string())?;
             // The peers read the 8-bit file; so do we, from the same pixels.
             let png = rendered.image.to_luma8(0.0, 1.0);
-            png.save(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-            let pixels = GrayImage::from_slice(png.width() as usize, png.height() as usize, png.as_raw())
-                .map_err(|e| e.to_string())?;
+            png.save(&path)
+                .map_err(|e| format!("{}: {e}", path.display()))?;
+            let pixels =
+                GrayImage::from_slice(png.width() as usize, png.height() as usize, png.as_raw())
+                    .map_err(|e| e.to_string())?;
             let truth = rendered.truth;
             // `clean` and `scene.noise` share the 0..1 intensity scale.
             let crb = cramer_rao_bound(&rendered.clean, truth, args.crb_half_window, scene.noise);
@@ -103,7 +106,10 @@ fn main() -> Result<(), String> {
                 ("conic-corners", [truth[0].round(), truth[1].round()]),
                 (
                     "conic-corners-start2px",
-                    [truth[0] + radius * angle.cos(), truth[1] + radius * angle.sin()],
+                    [
+                        truth[0] + radius * angle.cos(),
+                        truth[1] + radius * angle.sin(),
+                    ],
                 ),
             ];
             let ours = starts
@@ -119,7 +125,8 @@ fn main() -> Result<(), String> {
             Ok((manifest, ours))
         })
         .collect::<Result<_, String>>()?;
-    let mut manifest = std::fs::File::create(args.out.join("manifest.jsonl")).map_err(|e| e.to_string())?;
+    let mut manifest =
+        std::fs::File::create(args.out.join("manifest.jsonl")).map_err(|e| e.to_string())?;
     let mut ours = std::fs::File::create(args.out.join("ours.jsonl")).map_err(|e| e.to_string())?;
     for (m, o) in &results {
         writeln!(manifest, "{m}").map_err(|e| e.to_string())?;

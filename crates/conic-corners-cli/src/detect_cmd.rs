@@ -49,7 +49,10 @@ impl DetectArgs {
         };
         params.prefilter.sigma = self.sigma;
         if self.min_board_corners < 4 {
-            return Err(format!("--min-board-corners must be at least 4, got {}", self.min_board_corners));
+            return Err(format!(
+                "--min-board-corners must be at least 4, got {}",
+                self.min_board_corners
+            ));
         }
         params.labels.min_corners = self.min_board_corners;
         params.refine = self.refine.to_params()?;
@@ -117,7 +120,9 @@ fn overlay_path(args: &DetectArgs, input: &Path) -> Option<PathBuf> {
         return Some(p.clone());
     }
     let dir = args.draw_dir.as_ref()?;
-    let stem = input.file_stem().map_or("image".into(), |s| s.to_string_lossy().into_owned());
+    let stem = input
+        .file_stem()
+        .map_or("image".into(), |s| s.to_string_lossy().into_owned());
     Some(dir.join(format!("{stem}.png")))
 }
 
@@ -142,7 +147,8 @@ pub fn run(args: &DetectArgs) -> Result<(), String> {
         return Err("--draw takes one image; use --draw-dir DIR for several".into());
     }
     if let Some(dir) = &args.draw_dir {
-        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     }
     let bar = (args.images.len() > 1 && std::io::stderr().is_terminal()).then(|| {
         let bar = ProgressBar::new(args.images.len() as u64);
@@ -156,7 +162,10 @@ pub fn run(args: &DetectArgs) -> Result<(), String> {
         println!("image,board,row,col,x,y,score,status");
     }
     // Results are printed in input order as soon as every earlier image is done.
-    let next = Mutex::new((0usize, vec![None::<Result<String, String>>; args.images.len()]));
+    let next = Mutex::new((
+        0usize,
+        vec![None::<Result<String, String>>; args.images.len()],
+    ));
     let failures = Mutex::new(0usize);
     args.images.par_iter().enumerate().for_each(|(i, path)| {
         let result = process(args, &params, path);
@@ -191,7 +200,10 @@ pub fn run(args: &DetectArgs) -> Result<(), String> {
     }
     let failed = failures.into_inner().expect("lock not poisoned");
     if failed > 0 {
-        Err(format!("{failed} of {} images could not be processed", args.images.len()))
+        Err(format!(
+            "{failed} of {} images could not be processed",
+            args.images.len()
+        ))
     } else {
         Ok(())
     }

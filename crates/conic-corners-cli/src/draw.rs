@@ -46,7 +46,11 @@ fn draw_text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, colour:
                         for dy in 0..scale {
                             for dx in 0..scale {
                                 let (px, py) = (cx + c * scale + dx, y + r as i64 * scale + dy);
-                                if px >= 0 && py >= 0 && (px as u32) < img.width() && (py as u32) < img.height() {
+                                if px >= 0
+                                    && py >= 0
+                                    && (px as u32) < img.width()
+                                    && (py as u32) < img.height()
+                                {
                                     img.put_pixel(px as u32, py as u32, colour);
                                 }
                             }
@@ -91,7 +95,14 @@ pub fn draw_detection(image: &GrayImage, det: &Detection) -> RgbImage {
                 draw_filled_circle_mut(&mut out, p, 5 * unit, Rgb([255, 0, 0]));
             }
             let label = format!("{},{}", c.row, c.col);
-            draw_text(&mut out, p.0 as i64 + 4 * unit as i64, p.1 as i64 + 2 * unit as i64, &label, unit as i64, colour);
+            draw_text(
+                &mut out,
+                p.0 as i64 + 4 * unit as i64,
+                p.1 as i64 + 2 * unit as i64,
+                &label,
+                unit as i64,
+                colour,
+            );
         }
     }
     out

@@ -13,7 +13,11 @@ mod draw;
 mod synth_cmd;
 
 #[derive(Parser)]
-#[command(name = "conic-corners", version, about = "Subpixel checkerboard corners by quadratic-form fitting")]
+#[command(
+    name = "conic-corners",
+    version,
+    about = "Subpixel checkerboard corners by quadratic-form fitting"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -108,9 +112,14 @@ pub fn open_image(path: &Path) -> Result<GrayImage, String> {
 }
 
 fn read_points(path: &Path) -> Result<Vec<[f64; 2]>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let points: Vec<[f64; 2]> = serde_json::from_str(&text)
-        .map_err(|e| format!("{}: expected a JSON array of [x, y] pairs: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let points: Vec<[f64; 2]> = serde_json::from_str(&text).map_err(|e| {
+        format!(
+            "{}: expected a JSON array of [x, y] pairs: {e}",
+            path.display()
+        )
+    })?;
     if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
         return Err(format!("{}: point {i} is not finite", path.display()));
     }
@@ -127,7 +136,10 @@ fn run_refine(args: &RefineArgs) -> Result<(), String> {
         return Err("no points given: use --at X,Y or --points FILE".into());
     }
     let image = open_image(&args.image)?;
-    let corners: Vec<CornerOut> = refine(&image, &points, &params).into_iter().map(Into::into).collect();
+    let corners: Vec<CornerOut> = refine(&image, &points, &params)
+        .into_iter()
+        .map(Into::into)
+        .collect();
     let failed = corners
         .iter()
         .filter(|c| c.status == conic_corners::refine::Status::Failed)

@@ -57,7 +57,9 @@ pub fn run(args: &SynthArgs) -> Result<(), String> {
             let p = Protocol::ALL
                 .into_iter()
                 .find(|p| p.name() == name)
-                .ok_or_else(|| format!("unknown protocol \"{name}\" (noise, blur, perspective, curvature)"))?;
+                .ok_or_else(|| {
+                    format!("unknown protocol \"{name}\" (noise, blur, perspective, curvature)")
+                })?;
             scene_for(p, value, &mut rng)
         }
         (None, None) => CornerScene::default(),

@@ -36,7 +36,11 @@ fn write_corner(path: &Path, cx: f64, cy: f64) {
 }
 
 fn stdout_json(out: &Output) -> serde_json::Value {
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     serde_json::from_slice(&out.stdout).expect("stdout is one JSON object")
 }
 
@@ -53,16 +57,29 @@ fn refine_prints_corners_in_input_order() {
     let png = dir.join("corner.png");
     write_corner(&png, 100.3, 90.6);
     let out = bin()
-        .args(["refine", png.to_str().unwrap(), "--at", "101,91", "--at", "5,5"])
+        .args([
+            "refine",
+            png.to_str().unwrap(),
+            "--at",
+            "101,91",
+            "--at",
+            "5,5",
+        ])
         .output()
         .unwrap();
     let v = stdout_json(&out);
     let corners = v["corners"].as_array().unwrap();
     assert_eq!(corners.len(), 2);
-    let (x, y) = (corners[0]["x"].as_f64().unwrap(), corners[0]["y"].as_f64().unwrap());
+    let (x, y) = (
+        corners[0]["x"].as_f64().unwrap(),
+        corners[0]["y"].as_f64().unwrap(),
+    );
     assert_eq!(corners[0]["status"], "converged");
     // The blur of `image::imageops::blur` is not exactly Gaussian and the file is 8-bit: 0.05 px.
-    assert!((x - 100.3).abs() < 0.05 && (y - 90.6).abs() < 0.05, "{x} {y}");
+    assert!(
+        (x - 100.3).abs() < 0.05 && (y - 90.6).abs() < 0.05,
+        "{x} {y}"
+    );
     assert_eq!(corners[1]["status"], "failed");
     assert!(corners[1]["residual"].is_null());
 }
@@ -75,7 +92,12 @@ fn refine_reads_points_from_a_json_file() {
     let pts = dir.join("points.json");
     std::fs::write(&pts, "[[99.0, 91.5], [100.0, 90.0]]").unwrap();
     let out = bin()
-        .args(["refine", png.to_str().unwrap(), "--points", pts.to_str().unwrap()])
+        .args([
+            "refine",
+            png.to_str().unwrap(),
+            "--points",
+            pts.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     let v = stdout_json(&out);
@@ -92,31 +114,85 @@ fn bad_input_gives_a_clear_error_and_nonzero_exit() {
     write_corner(&png, 100.3, 90.6);
     let p = png.to_str().unwrap();
     // Missing file.
-    assert_fails(&bin().args(["refine", "/no/such/file.png", "--at", "1,1"]).output().unwrap(), "/no/such/file.png");
+    assert_fails(
+        &bin()
+            .args(["refine", "/no/such/file.png", "--at", "1,1"])
+            .output()
+            .unwrap(),
+        "/no/such/file.png",
+    );
     // Not an image.
     let txt = dir.join("notes.png");
     std::fs::write(&txt, "not an image").unwrap();
-    assert_fails(&bin().args(["refine", txt.to_str().unwrap(), "--at", "1,1"]).output().unwrap(), "notes.png");
+    assert_fails(
+        &bin()
+            .args(["refine", txt.to_str().unwrap(), "--at", "1,1"])
+            .output()
+            .unwrap(),
+        "notes.png",
+    );
     // Truncated PNG.
     let bytes = std::fs::read(&png).unwrap();
     let cut = dir.join("cut.png");
     std::fs::write(&cut, &bytes[..bytes.len() / 3]).unwrap();
-    assert_fails(&bin().args(["refine", cut.to_str().unwrap(), "--at", "1,1"]).output().unwrap(), "cut.png");
+    assert_fails(
+        &bin()
+            .args(["refine", cut.to_str().unwrap(), "--at", "1,1"])
+            .output()
+            .unwrap(),
+        "cut.png",
+    );
     // Empty file.
     let empty = dir.join("empty.png");
     std::fs::write(&empty, b"").unwrap();
-    assert_fails(&bin().args(["refine", empty.to_str().unwrap(), "--at", "1,1"]).output().unwrap(), "empty.png");
+    assert_fails(
+        &bin()
+            .args(["refine", empty.to_str().unwrap(), "--at", "1,1"])
+            .output()
+            .unwrap(),
+        "empty.png",
+    );
     // No points, malformed points, NaN points.
     assert_fails(&bin().args(["refine", p]).output().unwrap(), "no points");
-    assert_fails(&bin().args(["refine", p, "--at", "1;2"]).output().unwrap(), "X,Y");
-    assert_fails(&bin().args(["refine", p, "--at", "NaN,2"]).output().unwrap(), "finite");
+    assert_fails(
+        &bin().args(["refine", p, "--at", "1;2"]).output().unwrap(),
+        "X,Y",
+    );
+    assert_fails(
+        &bin().args(["refine", p, "--at", "NaN,2"]).output().unwrap(),
+        "finite",
+    );
     let bad = dir.join("bad.json");
     std::fs::write(&bad, "{\"x\": 1}").unwrap();
-    assert_fails(&bin().args(["refine", p, "--points", bad.to_str().unwrap()]).output().unwrap(), "array");
+    assert_fails(
+        &bin()
+            .args(["refine", p, "--points", bad.to_str().unwrap()])
+            .output()
+            .unwrap(),
+        "array",
+    );
     // Absurd parameters.
-    assert_fails(&bin().args(["refine", p, "--at", "1,1", "--reach=-3"]).output().unwrap(), "reach");
-    assert_fails(&bin().args(["refine", p, "--at", "1,1", "--stride", "0"]).output().unwrap(), "stride");
-    assert_fails(&bin().args(["refine", p, "--at", "1,1", "--blur", "inf"]).output().unwrap(), "blur");
+    assert_fails(
+        &bin()
+            .args(["refine", p, "--at", "1,1", "--reach=-3"])
+            .output()
+            .unwrap(),
+        "reach",
+    );
+    assert_fails(
+        &bin()
+            .args(["refine", p, "--at", "1,1", "--stride", "0"])
+            .output()
+            .unwrap(),
+        "stride",
+    );
+    assert_fails(
+        &bin()
+            .args(["refine", p, "--at", "1,1", "--blur", "inf"])
+            .output()
+            .unwrap(),
+        "blur",
+    );
 }
 
 #[test]
@@ -124,8 +200,20 @@ fn degenerate_images_fail_per_point_without_panicking() {
     let dir = tmp_dir("degenerate");
     for (name, w, h, v) in [("one.png", 1u32, 1u32, 0u8), ("flat.png", 64, 64, 128)] {
         let path = dir.join(name);
-        image::GrayImage::from_pixel(w, h, image::Luma([v])).save(&path).unwrap();
-        let out = bin().args(["refine", path.to_str().unwrap(), "--at", "0,0", "--at", "30,30"]).output().unwrap();
+        image::GrayImage::from_pixel(w, h, image::Luma([v]))
+            .save(&path)
+            .unwrap();
+        let out = bin()
+            .args([
+                "refine",
+                path.to_str().unwrap(),
+                "--at",
+                "0,0",
+                "--at",
+                "30,30",
+            ])
+            .output()
+            .unwrap();
         let v = stdout_json(&out);
         for c in v["corners"].as_array().unwrap() {
             assert_eq!(c["status"], "failed");
@@ -144,7 +232,10 @@ fn colour_and_sixteen_bit_images_are_read_as_grey() {
     let deep = dir.join("deep.png");
     grey.to_luma16().save(&deep).unwrap();
     for path in [rgb, deep] {
-        let out = bin().args(["refine", path.to_str().unwrap(), "--at", "101,91"]).output().unwrap();
+        let out = bin()
+            .args(["refine", path.to_str().unwrap(), "--at", "101,91"])
+            .output()
+            .unwrap();
         let v = stdout_json(&out);
         assert_eq!(v["corners"][0]["status"], "converged", "{}", path.display());
         assert!((v["corners"][0]["x"].as_f64().unwrap() - 100.3).abs() < 0.05);
@@ -188,7 +279,12 @@ fn detect_finds_and_labels_a_rendered_board() {
     let truth = write_board(&png);
     let overlay = dir.join("overlay.png");
     let out = bin()
-        .args(["detect", png.to_str().unwrap(), "--draw", overlay.to_str().unwrap()])
+        .args([
+            "detect",
+            png.to_str().unwrap(),
+            "--draw",
+            overlay.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     let v = stdout_json(&out);
@@ -199,12 +295,18 @@ fn detect_finds_and_labels_a_rendered_board() {
     assert_eq!(corners.len(), truth.len());
     for c in corners {
         let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
-        let err = truth.iter().map(|t| (t.x - x).hypot(t.y - y)).fold(f64::INFINITY, f64::min);
+        let err = truth
+            .iter()
+            .map(|t| (t.x - x).hypot(t.y - y))
+            .fold(f64::INFINITY, f64::min);
         assert!(err < 0.1, "corner {c} is {err} px from the truth");
     }
     assert!(image::open(&overlay).is_ok());
     // CSV: a header and one row per corner.
-    let out = bin().args(["detect", png.to_str().unwrap(), "--csv"]).output().unwrap();
+    let out = bin()
+        .args(["detect", png.to_str().unwrap(), "--csv"])
+        .output()
+        .unwrap();
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.starts_with("image,board,row,col,x,y,score,status\n"));
@@ -215,8 +317,17 @@ fn detect_finds_and_labels_a_rendered_board() {
 fn detect_reports_no_board_as_an_empty_list() {
     let dir = tmp_dir("noboard");
     let path = dir.join("grey.png");
-    image::GrayImage::from_fn(320, 240, |x, y| image::Luma([((x * 7 + y * 3) % 256) as u8])).save(&path).unwrap();
-    let v = stdout_json(&bin().args(["detect", path.to_str().unwrap()]).output().unwrap());
+    image::GrayImage::from_fn(320, 240, |x, y| {
+        image::Luma([((x * 7 + y * 3) % 256) as u8])
+    })
+    .save(&path)
+    .unwrap();
+    let v = stdout_json(
+        &bin()
+            .args(["detect", path.to_str().unwrap()])
+            .output()
+            .unwrap(),
+    );
     assert_eq!(v["boards"].as_array().unwrap().len(), 0);
 }
 
@@ -228,14 +339,26 @@ fn detect_batch_skips_bad_files_and_fails_at_the_end() {
     let bad = dir.join("broken.jpg");
     std::fs::write(&bad, b"\xff\xd8\xff garbage").unwrap();
     let out = bin()
-        .args(["detect", good.to_str().unwrap(), bad.to_str().unwrap(), good.to_str().unwrap()])
+        .args([
+            "detect",
+            good.to_str().unwrap(),
+            bad.to_str().unwrap(),
+            good.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert!(!out.status.success());
     let stdout = String::from_utf8(out.stdout).unwrap();
-    assert_eq!(stdout.lines().count(), 2, "the two good images are still reported");
+    assert_eq!(
+        stdout.lines().count(),
+        2,
+        "the two good images are still reported"
+    );
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("broken.jpg") && err.contains("1 of 3"), "{err}");
+    assert!(
+        err.contains("broken.jpg") && err.contains("1 of 3"),
+        "{err}"
+    );
     assert!(!err.contains("panicked"));
 }
 
@@ -245,9 +368,30 @@ fn detect_rejects_absurd_parameters() {
     let good = dir.join("board.png");
     write_board(&good);
     let g = good.to_str().unwrap();
-    assert_fails(&bin().args(["detect", g, "--corners", "0"]).output().unwrap(), "--corners");
-    assert_fails(&bin().args(["detect", g, "--corners=-5"]).output().unwrap(), "--corners");
-    assert_fails(&bin().args(["detect", g, "--sigma", "0"]).output().unwrap(), "sigma");
-    assert_fails(&bin().args(["detect", g, g, "--draw", "x.png"]).output().unwrap(), "--draw-dir");
-    assert_fails(&bin().args(["detect", "/no/such.png"]).output().unwrap(), "/no/such.png");
+    assert_fails(
+        &bin()
+            .args(["detect", g, "--corners", "0"])
+            .output()
+            .unwrap(),
+        "--corners",
+    );
+    assert_fails(
+        &bin().args(["detect", g, "--corners=-5"]).output().unwrap(),
+        "--corners",
+    );
+    assert_fails(
+        &bin().args(["detect", g, "--sigma", "0"]).output().unwrap(),
+        "sigma",
+    );
+    assert_fails(
+        &bin()
+            .args(["detect", g, g, "--draw", "x.png"])
+            .output()
+            .unwrap(),
+        "--draw-dir",
+    );
+    assert_fails(
+        &bin().args(["detect", "/no/such.png"]).output().unwrap(),
+        "/no/such.png",
+    );
 }

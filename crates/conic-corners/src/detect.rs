@@ -35,7 +35,9 @@ impl DetectParams {
         }
         let sigma = self.prefilter.sigma;
         if !(sigma.is_finite() && (0.5..=32.0).contains(&sigma)) {
-            return Err(format!("the pre-filter scale sigma must be in 0.5..=32 px, got {sigma}"));
+            return Err(format!(
+                "the pre-filter scale sigma must be in 0.5..=32 px, got {sigma}"
+            ));
         }
         self.refine.validate()
     }

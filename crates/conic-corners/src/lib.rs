@@ -22,6 +22,7 @@
 //! **Coordinates** everywhere: x to the right, y down, the centre of the top-left pixel is (0, 0)
 //! (OpenCV's convention). Pixel `(i, j)` covers `[i - 0.5, i + 0.5] × [j - 0.5, j + 0.5]`.
 
+pub mod board_fit;
 pub mod connectivity;
 pub mod detect;
 pub mod edge_sampling;

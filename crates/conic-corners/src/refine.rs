@@ -25,7 +25,9 @@ use crate::edge_sampling::{
     blur_sigma_from_widths, sample_edge_with, Axis, EdgeSample, SigmoidParams, LOGISTIC_TO_GAUSSIAN,
 };
 use crate::election::edge_orientations;
-use crate::quadratic_form::{fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve};
+use crate::quadratic_form::{
+    fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
+};
 use crate::GrayImage;
 use rayon::prelude::*;
 
@@ -72,10 +74,16 @@ impl RefineParams {
             }
         }
         if self.min_samples < 2 || self.min_samples > 1000 {
-            return Err(format!("min_samples must be in 2..=1000, got {}", self.min_samples));
+            return Err(format!(
+                "min_samples must be in 2..=1000, got {}",
+                self.min_samples
+            ));
         }
         if !(self.max_shift.is_finite() && self.max_shift > 0.0) {
-            return Err(format!("max_shift must be a positive number, got {}", self.max_shift));
+            return Err(format!(
+                "max_shift must be a positive number, got {}",
+                self.max_shift
+            ));
         }
         Ok(())
     }
@@ -141,7 +149,11 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     // Pilot: short walks with a generous window measure the blur and a first corner. Each
     // direction estimate is tried in turn until one gives a pilot solution.
     let pilot_sigma = params.blur.unwrap_or(2.0);
-    let pilot = WalkConfig::pilot(pilot_sigma, params.reach.min(20.0 + 6.0 * pilot_sigma), params.stride);
+    let pilot = WalkConfig::pilot(
+        pilot_sigma,
+        params.reach.min(20.0 + 6.0 * pilot_sigma),
+        params.stride,
+    );
     let mut found = None;
     for directions in direction_candidates(image, start) {
         walks.walk_all(image, start, directions, &pilot);
@@ -188,8 +200,13 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
 /// radii, smoothed along the ring) crosses its mid-level exactly four times on a corner, at the ray
 /// directions. Rings that do not show four clean crossings (noise, clutter, the border) are
 /// skipped; the surface-fit directions come last.
-fn direction_candidates(image: &GrayImage, p: [f64; 2]) -> impl Iterator<Item = [[f64; 2]; 4]> + '_ {
-    let rings = [10.0, 16.0, 6.0].into_iter().filter_map(move |r| ring_directions(image, p, r));
+fn direction_candidates(
+    image: &GrayImage,
+    p: [f64; 2],
+) -> impl Iterator<Item = [[f64; 2]; 4]> + '_ {
+    let rings = [10.0, 16.0, 6.0]
+        .into_iter()
+        .filter_map(move |r| ring_directions(image, p, r));
     let surface = [4usize, 7, 11]
         .into_iter()
         .find_map(|h| edge_orientations(image, p[0], p[1], h))
@@ -225,7 +242,9 @@ fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 
     }
     let (lo, hi) = smooth
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
     if !(hi > lo) {
         return None;
     }
@@ -335,7 +354,13 @@ impl Walks {
         }
     }
 
-    fn walk_all(&mut self, image: &GrayImage, corner: [f64; 2], dirs: [[f64; 2]; 4], cfg: &WalkConfig) {
+    fn walk_all(
+        &mut self,
+        image: &GrayImage,
+        corner: [f64; 2],
+        dirs: [[f64; 2]; 4],
+        cfg: &WalkConfig,
+    ) {
         for (k, ray) in self.rays.iter_mut().enumerate() {
             // The other edge: the rays at k ± 1.
             let other = dirs[(k + 1) % 4];
@@ -390,7 +415,12 @@ impl Walks {
     /// R = 100 px, σ = 3), so each sample moves back by that much along the fitted curve's normal
     /// and the curve is fitted again. Noise-free, this takes the corner error at κ = 3·10⁻³ from
     /// 0.019 px to 0.003 px.
-    fn solve(&mut self, near: [f64; 2], params: &RefineParams, sigma: Option<f64>) -> Option<Solution> {
+    fn solve(
+        &mut self,
+        near: [f64; 2],
+        params: &RefineParams,
+        sigma: Option<f64>,
+    ) -> Option<Solution> {
         let mut curves: [Option<Curve>; 2] = [None, None];
         let mut lines = [None, None];
         let mut status = Status::Converged;
@@ -406,7 +436,8 @@ impl Walks {
                 return None;
             }
             self.points.clear();
-            self.points.extend(a.iter().chain(b.iter()).map(|s| s.point));
+            self.points
+                .extend(a.iter().chain(b.iter()).map(|s| s.point));
             let mut fit = robust_curve_fit(&mut self.points, &mut self.distances)?;
             if let (Some(sigma), Curve::Conic(q)) = (sigma, &fit.0) {
                 let half_var = 0.5 * (sigma * sigma + 1.0 / 12.0);
@@ -450,7 +481,11 @@ impl Walks {
 fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Option<(Curve, f64)> {
     let first = fit_edge_curve(points, None)?;
     distances.clear();
-    distances.extend(points.iter().map(|p| first.curve.distance(p[0], p[1]).abs()));
+    distances.extend(
+        points
+            .iter()
+            .map(|p| first.curve.distance(p[0], p[1]).abs()),
+    );
     let mid = distances.len() / 2;
     let mad = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
     let limit = (3.5 * 1.4826 * mad).max(0.05);
@@ -536,9 +571,15 @@ fn walk_ray(
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();
             let off = (s.point[0] - q[0]).hypot(s.point[1] - q[1]);
-            let near = off <= if out.len() < 6 { 0.35 * hw as f64 } else { tolerance };
+            let near = off
+                <= if out.len() < 6 {
+                    0.35 * hw as f64
+                } else {
+                    tolerance
+                };
             let same = polarity == 0.0 || a.signum() == polarity;
-            let similar = out.len() < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
+            let similar =
+                out.len() < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
             near && same && similar
         });
         let Some(s) = accepted else {
@@ -568,7 +609,8 @@ fn walk_ray(
                 anchor = on_line;
                 // The line absorbs two degrees of freedom of the scatter.
                 let n = recent.len() as f64;
-                tolerance = (4.0 * spread * (n / (n - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+                tolerance =
+                    (4.0 * spread * (n / (n - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
             }
         }
     }

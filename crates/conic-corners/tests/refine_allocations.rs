@@ -48,6 +48,12 @@ fn allocations_do_not_grow_with_the_number_of_samples() {
     count(100.0); // warm up one-time tables (ring and surface-fit projectors)
     let (short, few) = count(40.0);
     let (long, many) = count(250.0);
-    assert!(many > 3 * few, "the long walk takes more samples ({few} vs {many})");
-    assert_eq!(short, long, "allocations: {short} for {few} samples, {long} for {many}");
+    assert!(
+        many > 3 * few,
+        "the long walk takes more samples ({few} vs {many})"
+    );
+    assert_eq!(
+        short, long,
+        "allocations: {short} for {few} samples, {long} for {many}"
+    );
 }

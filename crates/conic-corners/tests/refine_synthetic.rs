@@ -89,7 +89,11 @@ fn a_corner_near_the_border_is_refined_from_what_is_visible() {
         ..CornerScene::default()
     };
     let rendered = scene.render(1).unwrap();
-    let r = refine_one(&rendered.image, rounded(rendered.truth), &RefineParams::default());
+    let r = refine_one(
+        &rendered.image,
+        rounded(rendered.truth),
+        &RefineParams::default(),
+    );
     assert_ne!(r.status, Status::Failed);
     assert!(err(&r, rendered.truth) < 0.1, "{}", err(&r, rendered.truth));
 }
@@ -114,7 +118,11 @@ fn an_occluder_across_one_ray_does_not_pull_the_corner() {
     }
     let r = refine_one(&img, rounded(rendered.truth), &RefineParams::default());
     assert_ne!(r.status, Status::Failed);
-    assert!(err(&r, rendered.truth) < 0.05, "{}", err(&r, rendered.truth));
+    assert!(
+        err(&r, rendered.truth) < 0.05,
+        "{}",
+        err(&r, rendered.truth)
+    );
 }
 
 #[test]
@@ -137,7 +145,10 @@ fn unusable_points_and_images_fail_per_point() {
     }
     assert_eq!(out[4].x, 30.0, "a failed point keeps its start position");
     assert_eq!(out[5].status, Status::Converged);
-    for image in [GrayImage::filled(1, 1, 0.0).unwrap(), GrayImage::filled(64, 64, 7.0).unwrap()] {
+    for image in [
+        GrayImage::filled(1, 1, 0.0).unwrap(),
+        GrayImage::filled(64, 64, 7.0).unwrap(),
+    ] {
         for r in refine(&image, &[[0.0, 0.0], [32.0, 32.0]], &params) {
             assert_eq!(r.status, Status::Failed);
         }
@@ -147,7 +158,10 @@ fn unusable_points_and_images_fail_per_point() {
         ..params
     };
     assert!(absurd.validate().is_err());
-    assert_eq!(refine_one(&img, rounded(truth), &absurd).status, Status::Failed);
+    assert_eq!(
+        refine_one(&img, rounded(truth), &absurd).status,
+        Status::Failed
+    );
 }
 
 proptest! {

@@ -1,0 +1,1442 @@
+//! Board-wide corner localization (paper III-D to III-F applied to a whole labelled board): every
+//! grid line of the board is sampled as one chain of sigmoid edge points, the chain is cut where
+//! one conic cannot describe it ([`segmentation`](crate::segmentation)), each piece gets one robust
+//! quadratic-form fit, and every corner is the intersection of its row curve with its column curve.
+//!
+//! Compared with the single-corner refiner ([`refine`](crate::refine)), each curve is fitted to the
+//! samples of many squares at once, so its position at a corner is averaged over far more samples,
+//! and the model (line, parabola or conic) is exact for the image of a board line on a plane, a
+//! cylinder or an elliptic column, whatever the curvature.
+//!
+//! Steps, for a [`Board`] whose corners carry `(row, col)` and subpixel positions:
+//!
+//! 1. **Sampling** (III-D): along each row line (corners of one row by column) and each column
+//!    line, every edge segment between two consecutive corners is walked from one corner to the
+//!    next, one sigmoid fit per pixel scanline
+//!    ([`sample_edge_with`](crate::edge_sampling::sample_edge_with)), skipping the blurred zone
+//!    (`2.5σ + 3` px) around each corner and any scanline whose profile window would reach the
+//!    crossing edge. The walk starts along the line's tangent at the corner (quadratic through
+//!    three corners) and then predicts each crossing from a line through the last samples. Beyond
+//!    the first and last corner the edge continues along the outer squares: the chain is extended
+//!    there until the edge ends. The blur σ is measured by a pilot walk over a few segments.
+//! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
+//! 3. **Fitting** (III-F): [`fit_edge_curve`] per piece, with samples farther than 3.5 robust
+//!    standard deviations (MAD) from the curve rejected and the fit repeated until stable, so a pen
+//!    stroke or highlight across an edge does not pull the curve.
+//! 4. **Corners**: [`nearest_intersection`] of the piece of the row chain and of the column chain
+//!    that hold the corner, near the local position. A corner falls back to the local position
+//!    ([`Path::Local`], with a [`Fallback`] reason) when a curve has too few samples near it, a
+//!    fit fails, the curves do not meet or meet nearly tangentially, or the intersection is far
+//!    from the local position.
+//!
+//! **Uncertainty.** Each piece's position across the curve at the corner has variance
+//! `s² φ(u)ᵀ (ΦᵀΦ)⁻¹ φ(u)`: `s²` the residual variance of the kept samples (their squared
+//! distances over `n − k`), `Φ` the design matrix of the samples in the piece's principal frame
+//! with the polynomial basis of the selected model (`1, u` for a line, `1, u, u²` for a parabola,
+//! `1, u, …, u⁴` for a conic, whose two extra coefficients act like `u³`, `u⁴` along a nearly
+//! straight edge), `u` the corner's position along the piece. Shifting the two curves by `δ₁`,
+//! `δ₂` along their unit normals `n₁`, `n₂` moves the intersection by `N⁻¹ δ` with `N = [n₁ᵀ; n₂ᵀ]`,
+//! so the corner's covariance is `N⁻¹ diag(v₁, v₂) N⁻ᵀ + σ_sys² I`, with `σ_sys`
+//! ([`BoardFitParams::systematic_sigma`]) for the model error of the sigmoid and pixel sampling.
+//!
+//! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
+
+use crate::detect::Board;
+use crate::edge_sampling::{blur_sigma_from_widths, sample_edge_with, Axis, SigmoidParams};
+use crate::quadratic_form::{fit_edge_curve, nearest_intersection, Curve, EdgeModel};
+use crate::segmentation::{segment_chain, SegmentationParams};
+use crate::GrayImage;
+use nalgebra::{Matrix5, Vector5};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::ops::Range;
+
+/// Parameters of [`fit_board`]. `Default` is what the tests and benchmarks use.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoardFitParams {
+    /// Gaussian blur σ (px) of the image if known; `None` measures it by a pilot walk.
+    pub blur: Option<f64>,
+    /// Scanlines between consecutive edge samples (1 = every row or column).
+    pub stride: usize,
+    /// Extend each line's chain beyond its first and last corner along the outer squares.
+    pub extend: bool,
+    /// Chain segmentation (III-E).
+    pub segmentation: SegmentationParams,
+    /// A curve needs at least this many kept samples within `near_squares` squares of a corner
+    /// (along the chain) for a board-wide answer.
+    pub min_near_samples: usize,
+    /// See `min_near_samples`. Also the support of each corner's curve fits: the samples of its
+    /// piece within this many squares (px distance) of the corner. A square is the mean distance to
+    /// the corner's line neighbours.
+    pub near_squares: f64,
+    /// Largest accepted distance (px) between the board-wide and the local answer.
+    pub max_shift: f64,
+    /// Smallest accepted angle (degrees) between the row and column curves at a corner.
+    pub min_angle_deg: f64,
+    /// Model-error floor σ_sys (px) added to every board-wide covariance (see the module docs).
+    pub systematic_sigma: f64,
+    /// Nominal σ (px, per axis) reported for corners that keep the local answer.
+    pub local_sigma: f64,
+}
+
+impl Default for BoardFitParams {
+    fn default() -> Self {
+        Self {
+            blur: None,
+            stride: 1,
+            extend: true,
+            segmentation: SegmentationParams::default(),
+            min_near_samples: 6,
+            near_squares: 2.0,
+            max_shift: 1.5,
+            min_angle_deg: 10.0,
+            systematic_sigma: 0.005,
+            local_sigma: 0.1,
+        }
+    }
+}
+
+/// Which answer a [`FittedCorner`] carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Path {
+    /// Intersection of the board-wide row and column curves.
+    Board,
+    /// The local refiner's answer (the input position), kept for the [`Fallback`] reason given.
+    Local,
+}
+
+/// Why a corner kept its local answer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fallback {
+    /// The corner's position is not finite, or it has no line neighbour on its row or column.
+    NoLine,
+    /// A curve has fewer than [`BoardFitParams::min_near_samples`] samples near the corner.
+    FewSamples,
+    /// A curve fit failed (degenerate samples).
+    FitFailed,
+    /// The row and column curves do not meet.
+    NoIntersection,
+    /// The curves meet at less than [`BoardFitParams::min_angle_deg`].
+    Tangent,
+    /// The intersection is farther than [`BoardFitParams::max_shift`] from the local answer.
+    TooFar,
+}
+
+/// One corner of the board after [`fit_board`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FittedCorner {
+    /// Row on the board (as in the input).
+    pub row: i32,
+    /// Column on the board (as in the input).
+    pub col: i32,
+    /// Position (image coordinates).
+    pub x: f64,
+    /// Position (image coordinates).
+    pub y: f64,
+    /// Which answer this is.
+    pub path: Path,
+    /// Why the local answer was kept; `None` on [`Path::Board`].
+    pub fallback: Option<Fallback>,
+    /// Covariance of `(x, y)` (px²): propagated from the curve fits on [`Path::Board`] (see the
+    /// module docs), `local_sigma² I` on [`Path::Local`].
+    pub cov: [[f64; 2]; 2],
+    /// `√` of the larger eigenvalue of `cov`: the standard deviation (px) in the worst direction.
+    pub sigma: f64,
+}
+
+/// Whether a fitted line runs along a row or a column of the board.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LineKind {
+    /// Corners of one row, ordered by column.
+    Row,
+    /// Corners of one column, ordered by row.
+    Column,
+}
+
+/// One piece of a line's chain and its fitted curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FittedSegment {
+    /// Indices of the piece's samples in [`FittedLine::samples`].
+    pub samples: (usize, usize),
+    /// The robust fit of the whole piece: curve, selected model, RMS distance (px) of the kept
+    /// samples and their number; `None` when the piece could not be fitted.
+    pub fit: Option<(Curve, EdgeModel, f64, usize)>,
+}
+
+impl FittedSegment {
+    /// The piece's sample range.
+    pub fn range(&self) -> Range<usize> {
+        self.samples.0..self.samples.1
+    }
+}
+
+/// A grid line: its edge samples in order along the line and the fitted pieces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FittedLine {
+    /// Row or column line.
+    pub kind: LineKind,
+    /// The row (for [`LineKind::Row`]) or column index.
+    pub index: i32,
+    /// Edge samples (image coordinates), ordered along the line.
+    pub samples: Vec<[f64; 2]>,
+    /// Pieces of the chain, in order, covering all samples.
+    pub segments: Vec<FittedSegment>,
+}
+
+/// Everything [`fit_board_with_curves`] computed: the corners, the lines for drawing, the blur.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoardFit {
+    /// Corners, in the order of `board.corners`.
+    pub corners: Vec<FittedCorner>,
+    /// Row lines then column lines.
+    pub lines: Vec<FittedLine>,
+    /// Blur σ (px) used for sampling (given or measured).
+    pub blur: f64,
+}
+
+/// Localizes every corner of `board` by board-wide curve fitting (see the module docs). Returns
+/// one [`FittedCorner`] per `board.corners` entry, in the same order; corners that cannot be fitted
+/// keep their input position with [`Path::Local`]. Never panics and never returns a non-finite
+/// board-wide position.
+pub fn fit_board(image: &GrayImage, board: &Board, params: &BoardFitParams) -> Vec<FittedCorner> {
+    run(image, board, params, false).corners
+}
+
+/// [`fit_board`], also returning every line's samples and fitted pieces (for drawing; each piece
+/// is fitted whole, whereas corners use fits over a few squares around them).
+pub fn fit_board_with_curves(
+    image: &GrayImage,
+    board: &Board,
+    params: &BoardFitParams,
+) -> BoardFit {
+    run(image, board, params, true)
+}
+
+/// The work of [`fit_board`]; `whole_pieces` also fits every piece whole, for drawing.
+fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: bool) -> BoardFit {
+    let grid = Grid::new(board);
+    let sigma = params
+        .blur
+        .filter(|b| b.is_finite() && *b >= 0.0)
+        .or_else(|| pilot_blur(image, &grid, params.stride.max(1)))
+        .unwrap_or(1.5)
+        .clamp(0.5, 12.0);
+    let cfg = WalkConfig::new(sigma, params.stride.max(1));
+    let lines: Vec<(FittedLine, Vec<(usize, usize)>)> = grid
+        .lines
+        .par_iter()
+        .map(|line| sample_and_fit_line(image, &grid, line, &cfg, params, whole_pieces))
+        .collect();
+    // For each corner, its position in each of its two lines: (line, samples before it).
+    let mut slots: Vec<[Option<(usize, usize)>; 2]> = vec![[None, None]; board.corners.len()];
+    for (li, (fl, cuts)) in lines.iter().enumerate() {
+        let k = usize::from(fl.kind == LineKind::Column);
+        for &(corner, cut) in cuts {
+            slots[corner][k] = Some((li, cut));
+        }
+    }
+    let corners = board
+        .corners
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let local = |why| local_corner(c.row, c.col, [c.x, c.y], why, params);
+            let (Some(r), Some(k)) = (slots[i][0], slots[i][1]) else {
+                return local(Fallback::NoLine);
+            };
+            let p = [c.x, c.y];
+            let square = grid.square(i);
+            let pick = |(li, cut): (usize, usize)| {
+                choose_segment(
+                    &lines[li].0,
+                    cut,
+                    p,
+                    square * params.near_squares,
+                    params.min_near_samples,
+                )
+            };
+            match (pick(r), pick(k)) {
+                (Ok(a), Ok(b)) => intersect_corner(c.row, c.col, p, a, b, params),
+                (Err(e), _) | (_, Err(e)) => local(e),
+            }
+        })
+        .collect();
+    BoardFit {
+        corners,
+        lines: lines.into_iter().map(|l| l.0).collect(),
+        blur: sigma,
+    }
+}
+
+fn local_corner(
+    row: i32,
+    col: i32,
+    p: [f64; 2],
+    why: Fallback,
+    params: &BoardFitParams,
+) -> FittedCorner {
+    let s = if params.local_sigma.is_finite() && params.local_sigma > 0.0 {
+        params.local_sigma
+    } else {
+        0.1
+    };
+    FittedCorner {
+        row,
+        col,
+        x: p[0],
+        y: p[1],
+        path: Path::Local,
+        fallback: Some(why),
+        cov: [[s * s, 0.0], [0.0, s * s]],
+        sigma: s,
+    }
+}
+
+/// The board's lines: each an ordered list of corner indices with consecutive labels.
+struct Grid {
+    points: Vec<[f64; 2]>,
+    lines: Vec<GridLine>,
+    /// Per corner and line kind (row, column): the unit tangent of that line at the corner,
+    /// oriented by increasing label.
+    tangents: Vec<[Option<[f64; 2]>; 2]>,
+}
+
+struct GridLine {
+    kind: LineKind,
+    index: i32,
+    /// Runs of corners with consecutive labels along the line (a missing corner breaks a run).
+    corners: Vec<usize>,
+}
+
+impl Grid {
+    fn new(board: &Board) -> Self {
+        let points: Vec<[f64; 2]> = board.corners.iter().map(|c| [c.x, c.y]).collect();
+        let finite = |i: usize| points[i].iter().all(|v| v.is_finite());
+        let mut by: [HashMap<i32, Vec<(i32, usize)>>; 2] = [HashMap::new(), HashMap::new()];
+        for (i, c) in board.corners.iter().enumerate() {
+            if finite(i) {
+                by[0].entry(c.row).or_default().push((c.col, i));
+                by[1].entry(c.col).or_default().push((c.row, i));
+            }
+        }
+        let mut lines = Vec::new();
+        let mut tangents = vec![[None, None]; points.len()];
+        for (k, map) in by.into_iter().enumerate() {
+            let kind = if k == 0 {
+                LineKind::Row
+            } else {
+                LineKind::Column
+            };
+            let mut keys: Vec<i32> = map.keys().copied().collect();
+            keys.sort_unstable();
+            for key in keys {
+                let mut members = map[&key].clone();
+                members.sort_unstable();
+                members.dedup_by_key(|m| m.0);
+                // Split into runs of consecutive labels.
+                let mut run: Vec<usize> = Vec::new();
+                let mut last = None;
+                for (label, i) in members {
+                    if last.is_some_and(|l: i32| l + 1 != label) {
+                        flush_run(&mut run, kind, key, &points, &mut lines, &mut tangents, k);
+                    }
+                    run.push(i);
+                    last = Some(label);
+                }
+                flush_run(&mut run, kind, key, &points, &mut lines, &mut tangents, k);
+            }
+        }
+        Grid {
+            points,
+            lines,
+            tangents,
+        }
+    }
+
+    /// Mean distance (px) from corner `i` to its line neighbours (the local square size).
+    fn square(&self, i: usize) -> f64 {
+        let mut acc = (0.0, 0);
+        for line in &self.lines {
+            if let Some(pos) = line.corners.iter().position(|&c| c == i) {
+                for j in [pos.wrapping_sub(1), pos + 1] {
+                    if let Some(&n) = line.corners.get(j) {
+                        acc.0 += dist(self.points[i], self.points[n]);
+                        acc.1 += 1;
+                    }
+                }
+            }
+        }
+        if acc.1 == 0 {
+            20.0
+        } else {
+            acc.0 / acc.1 as f64
+        }
+    }
+}
+
+fn flush_run(
+    run: &mut Vec<usize>,
+    kind: LineKind,
+    index: i32,
+    points: &[[f64; 2]],
+    lines: &mut Vec<GridLine>,
+    tangents: &mut [[Option<[f64; 2]>; 2]],
+    k: usize,
+) {
+    if run.len() >= 2 {
+        for (j, &i) in run.iter().enumerate() {
+            tangents[i][k] = tangent_at(run, points, j);
+        }
+        lines.push(GridLine {
+            kind,
+            index,
+            corners: std::mem::take(run),
+        });
+    }
+    run.clear();
+}
+
+/// Unit tangent at the `j`-th corner of a run, oriented along the run: the derivative of the
+/// quadratic through three consecutive corners parametrized by chord length (Newton form), or the
+/// chord for a run of two.
+fn tangent_at(run: &[usize], points: &[[f64; 2]], j: usize) -> Option<[f64; 2]> {
+    let p = |k: usize| points[run[k]];
+    let d = if run.len() < 3 {
+        let (a, b) = (p(0), p(1));
+        [b[0] - a[0], b[1] - a[1]]
+    } else {
+        // Three corners around j and the offset of j among them.
+        let s = j.saturating_sub(1).min(run.len() - 3);
+        let (a, b, c) = (p(s), p(s + 1), p(s + 2));
+        let (h1, h2) = (dist(a, b), dist(b, c));
+        if !(h1 > 0.0 && h2 > 0.0) {
+            return None;
+        }
+        let f01 = [(b[0] - a[0]) / h1, (b[1] - a[1]) / h1];
+        let f12 = [(c[0] - b[0]) / h2, (c[1] - b[1]) / h2];
+        let f012 = [(f12[0] - f01[0]) / (h1 + h2), (f12[1] - f01[1]) / (h1 + h2)];
+        // P(t) = a + f01 t + f012 t (t − h1); P'(t) = f01 + f012 (2t − h1).
+        let t = match j - s {
+            0 => 0.0,
+            1 => h1,
+            _ => h1 + h2,
+        };
+        [
+            f01[0] + f012[0] * (2.0 * t - h1),
+            f01[1] + f012[1] * (2.0 * t - h1),
+        ]
+    };
+    normalize(d)
+}
+
+fn normalize(d: [f64; 2]) -> Option<[f64; 2]> {
+    let n = d[0].hypot(d[1]);
+    (n > 0.0 && n.is_finite()).then(|| [d[0] / n, d[1] / n])
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// How the walks sample.
+struct WalkConfig {
+    sigma: f64,
+    /// Distance (px) from a corner of the first sample.
+    start: f64,
+    /// Extra clearance (px) between a profile window and a crossing edge.
+    guard: f64,
+    stride: usize,
+    sigmoid: SigmoidParams,
+}
+
+impl WalkConfig {
+    fn new(sigma: f64, stride: usize) -> Self {
+        Self {
+            sigma,
+            start: 2.5 * sigma + 3.0,
+            guard: 2.5 * sigma + 1.0,
+            stride,
+            sigmoid: SigmoidParams {
+                min_contrast_to_noise: 3.0,
+                ..SigmoidParams::default()
+            },
+        }
+    }
+
+    /// Half-width (pixels) of the profile window for an edge of direction `d`: about ±3σ across
+    /// the edge, stretched by `1/|cos|` on an oblique scanline.
+    fn half_width(&self, d: [f64; 2]) -> usize {
+        let along = d[0].abs().max(d[1].abs()).max(0.5);
+        ((3.0 * self.sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
+    }
+}
+
+/// One walk along an edge.
+struct Walk {
+    from: [f64; 2],
+    /// Initial unit tangent.
+    dir: [f64; 2],
+    /// The walk ends where `(q − from) · dir > limit`.
+    limit: f64,
+    /// Crossing edges (point, unit direction) near which windows are skipped.
+    clash: [Option<([f64; 2], [f64; 2])>; 2],
+    /// An open walk ends after [`MAX_MISSES`] missed scanlines in a row and drops the samples in
+    /// the blurred zone where the edge ended; a closed one (between two corners) goes on to the
+    /// limit, across occluders.
+    open: bool,
+}
+
+/// Consecutive missed scanlines that end an open walk.
+const MAX_MISSES: usize = 6;
+/// Samples behind each prediction.
+const PREDICT_SAMPLES: usize = 16;
+
+/// Walks one edge (see [`Walk`]), appending sample points to `out` and, if given, their normal
+/// sigmoid widths to `widths`. A sample is accepted when its fit succeeds, it lies near the
+/// predicted crossing, has the walk's polarity and a contrast within 0.4–2.5× that of the first
+/// samples.
+fn walk_edge(
+    image: &GrayImage,
+    w: &Walk,
+    cfg: &WalkConfig,
+    out: &mut Vec<[f64; 2]>,
+    mut widths: Option<&mut Vec<f64>>,
+) {
+    let first = out.len();
+    let mut d = w.dir;
+    let mut anchor = [w.from[0] + cfg.start * d[0], w.from[1] + cfg.start * d[1]];
+    let mut first_scan = true;
+    let (mut misses, mut polarity, mut contrast_ref) = (0, 0.0f64, 0.0f64);
+    let mut tolerance = 1.0 + 0.5 * cfg.sigma;
+    let mut ended = false;
+    let mut count = 0usize;
+    loop {
+        let steep = d[1].abs() >= d[0].abs();
+        let q = if first_scan {
+            anchor
+        } else if steep {
+            let dy = d[1].signum() * cfg.stride as f64;
+            [anchor[0] + d[0] / d[1] * dy, anchor[1] + dy]
+        } else {
+            let dx = d[0].signum() * cfg.stride as f64;
+            [anchor[0] + dx, anchor[1] + d[1] / d[0] * dx]
+        };
+        first_scan = false;
+        anchor = q;
+        if !(q[0].is_finite() && q[1].is_finite()) {
+            break;
+        }
+        let t = (q[0] - w.from[0]) * w.dir[0] + (q[1] - w.from[1]) * w.dir[1];
+        if t > w.limit || count > 100_000 {
+            break;
+        }
+        count += 1;
+        let hw = cfg.half_width(d);
+        let clash = w.clash.iter().flatten().any(|&(c, o)| {
+            let gap = if steep {
+                let y0 = q[1].round();
+                (o[1].abs() > 1e-9).then(|| (c[0] + (y0 - c[1]) * o[0] / o[1] - q[0]).abs())
+            } else {
+                let x0 = q[0].round();
+                (o[0].abs() > 1e-9).then(|| (c[1] + (x0 - c[0]) * o[1] / o[0] - q[1]).abs())
+            };
+            gap.is_some_and(|g| g <= hw as f64 + cfg.guard)
+        });
+        if clash {
+            continue;
+        }
+        let n = out.len() - first;
+        let accepted = sample_edge_with(image, q, d, hw, None, &cfg.sigmoid).and_then(|s| {
+            // Signed contrast across the walk's left normal, whatever the scan axis.
+            let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
+            let a = s.fit.amplitude * along_scan.signum();
+            let off = dist(s.point, q);
+            let near = off <= if n < 6 { 0.35 * hw as f64 } else { tolerance };
+            let same = polarity == 0.0 || a.signum() == polarity;
+            let similar = n < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
+            (near && same && similar).then_some((s, a))
+        });
+        let Some((s, a)) = accepted else {
+            misses += 1;
+            if w.open && misses >= MAX_MISSES {
+                ended = true;
+                break;
+            }
+            continue;
+        };
+        misses = 0;
+        if polarity == 0.0 {
+            polarity = a.signum();
+        }
+        if n < 5 {
+            contrast_ref = (contrast_ref * n as f64 + a.abs()) / (n + 1) as f64;
+        }
+        out.push(s.point);
+        if let Some(wd) = widths.as_deref_mut() {
+            wd.push(s.normal_width(d));
+        }
+        let recent = &out[first.max(out.len().saturating_sub(PREDICT_SAMPLES))..];
+        anchor = s.point;
+        if recent.len() >= 6 {
+            if let Some((line_dir, on_line, spread)) = local_line(recent, d) {
+                d = line_dir;
+                anchor = on_line;
+                let m = recent.len() as f64;
+                tolerance =
+                    (4.0 * spread * (m / (m - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+            }
+        }
+    }
+    if ended {
+        if let Some(&end) = out[first..].last() {
+            let guard = cfg.guard + 2.0;
+            let mut k = out.len();
+            while k > first && dist(out[k - 1], end) <= guard {
+                k -= 1;
+            }
+            out.truncate(k);
+        }
+    }
+}
+
+/// Least-squares line through `pts`: its unit direction (oriented like `d`), the projection of the
+/// last point onto it, and the RMS distance of the points to it.
+fn local_line(pts: &[[f64; 2]], d: [f64; 2]) -> Option<([f64; 2], [f64; 2], f64)> {
+    let n = pts.len() as f64;
+    if pts.len() < 2 {
+        return None;
+    }
+    let (mut mx, mut my) = (0.0, 0.0);
+    for p in pts {
+        mx += p[0];
+        my += p[1];
+    }
+    let (mx, my) = (mx / n, my / n);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in pts {
+        let (dx, dy) = (p[0] - mx, p[1] - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let mut u = [theta.cos(), theta.sin()];
+    if u[0] * d[0] + u[1] * d[1] < 0.0 {
+        u = [-u[0], -u[1]];
+    }
+    let last = *pts.last()?;
+    let t = (last[0] - mx) * u[0] + (last[1] - my) * u[1];
+    let across = (sxx * u[1] * u[1] - 2.0 * sxy * u[0] * u[1] + syy * u[0] * u[0]).max(0.0);
+    Some((u, [mx + t * u[0], my + t * u[1]], (across / n).sqrt()))
+}
+
+/// The crossing edge at corner `i` for a walk along line kind `k`: the other line's tangent.
+fn clash_at(grid: &Grid, i: usize, k: usize) -> Option<([f64; 2], [f64; 2])> {
+    grid.tangents[i][1 - k].map(|t| (grid.points[i], t))
+}
+
+/// The walk along segment `a → b` of a line of kind `k`.
+fn segment_walk(grid: &Grid, a: usize, b: usize, k: usize) -> Option<Walk> {
+    let (pa, pb) = (grid.points[a], grid.points[b]);
+    let chord = normalize([pb[0] - pa[0], pb[1] - pa[1]])?;
+    let dir = grid.tangents[a][k]
+        .filter(|t| t[0] * chord[0] + t[1] * chord[1] > 0.5)
+        .unwrap_or(chord);
+    // The limit is measured along `dir`; stop the blurred zone short of b.
+    let along = (pb[0] - pa[0]) * dir[0] + (pb[1] - pa[1]) * dir[1];
+    Some(Walk {
+        from: pa,
+        dir,
+        limit: along,
+        clash: [clash_at(grid, a, k), clash_at(grid, b, k)],
+        open: false,
+    })
+}
+
+/// Blur σ from a pilot walk (free sigmoid widths, generous windows) over up to eight segments
+/// near the middle of the longest line.
+fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
+    let cfg = WalkConfig::new(2.0, stride);
+    let line = grid.lines.iter().max_by_key(|l| l.corners.len())?;
+    let k = usize::from(line.kind == LineKind::Column);
+    let mid = line.corners.len() / 2;
+    let (mut pts, mut widths) = (Vec::new(), Vec::new());
+    let lo = mid.saturating_sub(4);
+    for j in lo..(lo + 8).min(line.corners.len() - 1) {
+        if let Some(mut w) = segment_walk(grid, line.corners[j], line.corners[j + 1], k) {
+            w.limit -= cfg.start;
+            walk_edge(image, &w, &cfg, &mut pts, Some(&mut widths));
+        }
+    }
+    if widths.len() < 8 {
+        return None;
+    }
+    blur_sigma_from_widths(&widths)
+}
+
+/// Per piece: what the corner covariance needs.
+#[derive(Clone)]
+struct SegmentStats {
+    /// Principal frame of the kept samples: centre, unit tangent, scale (RMS extent).
+    centre: [f64; 2],
+    tangent: [f64; 2],
+    scale: f64,
+    /// `(ΦᵀΦ)⁻¹` (unused dimensions are identity and never touched by `φ`).
+    inverse: Matrix5<f64>,
+    /// Polynomial degree of the basis (1, 2 or 4).
+    degree: usize,
+    /// Residual variance `s²` (px²).
+    s2: f64,
+    /// Positions along the chain (sample indices) of the kept samples.
+    kept: Vec<usize>,
+}
+
+/// Samples one line, segments its chain, fits every piece (for drawing). Returns the line and
+/// the chain position of each corner: `(corner, samples before it)`.
+fn sample_and_fit_line(
+    image: &GrayImage,
+    grid: &Grid,
+    line: &GridLine,
+    cfg: &WalkConfig,
+    params: &BoardFitParams,
+    whole_pieces: bool,
+) -> (FittedLine, Vec<(usize, usize)>) {
+    let k = usize::from(line.kind == LineKind::Column);
+    let cs = &line.corners;
+    let mut pts: Vec<[f64; 2]> = Vec::new();
+    let mut cuts = Vec::with_capacity(cs.len());
+    // Before the first corner: walk outwards, then reverse into chain order.
+    if params.extend {
+        if let Some(w) = extension_walk(grid, cs[0], cs[1], k) {
+            walk_edge(image, &w, cfg, &mut pts, None);
+            pts.reverse();
+        }
+    }
+    for j in 0..cs.len() - 1 {
+        cuts.push((cs[j], pts.len()));
+        if let Some(mut w) = segment_walk(grid, cs[j], cs[j + 1], k) {
+            w.limit -= cfg.start;
+            walk_edge(image, &w, cfg, &mut pts, None);
+        }
+    }
+    cuts.push((cs[cs.len() - 1], pts.len()));
+    if params.extend {
+        let n = cs.len();
+        if let Some(w) = extension_walk(grid, cs[n - 1], cs[n - 2], k) {
+            walk_edge(image, &w, cfg, &mut pts, None);
+        }
+    }
+    let ranges = segment_chain(&pts, &params.segmentation);
+    let mut scratch = Vec::new();
+    let mut segments = Vec::with_capacity(ranges.len());
+    for r in ranges {
+        let fitted = if whole_pieces {
+            robust_fit(&pts, r.clone(), &mut scratch)
+        } else {
+            None
+        };
+        segments.push(FittedSegment {
+            samples: (r.start, r.end),
+            fit: fitted.as_ref().map(|f| (f.0, f.1, f.2, f.3.kept.len())),
+        });
+    }
+    (
+        FittedLine {
+            kind: line.kind,
+            index: line.index,
+            samples: pts,
+            segments,
+        },
+        cuts,
+    )
+}
+
+/// The open walk from end corner `e` away from its neighbour `n`, up to one square.
+fn extension_walk(grid: &Grid, e: usize, n: usize, k: usize) -> Option<Walk> {
+    let (pe, pn) = (grid.points[e], grid.points[n]);
+    let away = normalize([pe[0] - pn[0], pe[1] - pn[1]])?;
+    let dir = grid.tangents[e][k]
+        .map(|t| {
+            if t[0] * away[0] + t[1] * away[1] < 0.0 {
+                [-t[0], -t[1]]
+            } else {
+                t
+            }
+        })
+        .filter(|t| t[0] * away[0] + t[1] * away[1] > 0.5)
+        .unwrap_or(away);
+    Some(Walk {
+        from: pe,
+        dir,
+        limit: dist(pe, pn),
+        clash: [clash_at(grid, e, k), None],
+        open: true,
+    })
+}
+
+impl SegmentStats {
+    /// Variance (px²) of the curve's position across itself at `p`.
+    fn variance_at(&self, p: [f64; 2]) -> f64 {
+        let u = ((p[0] - self.centre[0]) * self.tangent[0]
+            + (p[1] - self.centre[1]) * self.tangent[1])
+            / self.scale;
+        let phi = basis(u, self.degree);
+        self.s2 * (phi.transpose() * self.inverse * phi)[0]
+    }
+}
+
+/// `(1, u, …, u^degree, 0, …)`.
+fn basis(u: f64, degree: usize) -> Vector5<f64> {
+    let mut phi = Vector5::zeros();
+    let mut v = 1.0;
+    for k in 0..=degree.min(4) {
+        phi[k] = v;
+        v *= u;
+    }
+    phi
+}
+
+/// Fits one piece with outlier rejection: samples farther than `max(3.5 · 1.4826 · MAD, 0.05 px)`
+/// from the curve are dropped and the fit repeated (rejected samples may come back) until the kept
+/// set stops changing, at most five times. Returns the curve, its model, the RMS of the kept
+/// samples and the statistics for the corner covariance.
+fn robust_fit(
+    pts: &[[f64; 2]],
+    range: Range<usize>,
+    scratch: &mut Vec<[f64; 2]>,
+) -> Option<(Curve, EdgeModel, f64, SegmentStats)> {
+    let mut kept: Vec<usize> = range.clone().collect();
+    let mut dev: Vec<f64> = Vec::with_capacity(range.len());
+    let mut fit = None;
+    for _ in 0..5 {
+        if kept.len() < 3 {
+            return None;
+        }
+        scratch.clear();
+        scratch.extend(kept.iter().map(|&i| pts[i]));
+        let f = fit_edge_curve(scratch, None)?;
+        dev.clear();
+        dev.extend(
+            kept.iter()
+                .map(|&i| f.curve.distance(pts[i][0], pts[i][1]).abs()),
+        );
+        let mid = dev.len() / 2;
+        let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let limit = (3.5 * 1.4826 * mad).max(0.05);
+        let next: Vec<usize> = range
+            .clone()
+            .filter(|&i| f.curve.distance(pts[i][0], pts[i][1]).abs() <= limit)
+            .collect();
+        let stable = next == kept;
+        fit = Some(f);
+        if stable {
+            break;
+        }
+        kept = next;
+    }
+    let f = fit?;
+    if kept.len() < 3 {
+        return None;
+    }
+    let stats = segment_stats(pts, kept, &f.curve, f.model)?;
+    Some((f.curve, f.model, f.rms, stats))
+}
+
+/// The covariance ingredients of a fitted piece; see [`SegmentStats`].
+fn segment_stats(
+    pts: &[[f64; 2]],
+    kept: Vec<usize>,
+    curve: &Curve,
+    model: EdgeModel,
+) -> Option<SegmentStats> {
+    let n = kept.len() as f64;
+    let (mut mx, mut my) = (0.0, 0.0);
+    for &i in &kept {
+        mx += pts[i][0];
+        my += pts[i][1];
+    }
+    let (mx, my) = (mx / n, my / n);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for &i in &kept {
+        let (dx, dy) = (pts[i][0] - mx, pts[i][1] - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let t = [theta.cos(), theta.sin()];
+    let var_t = (sxx * t[0] * t[0] + 2.0 * sxy * t[0] * t[1] + syy * t[1] * t[1]) / n;
+    let scale = var_t.sqrt();
+    if scale.is_nan() || scale <= 0.0 {
+        return None;
+    }
+    let degree = match model {
+        EdgeModel::Line => 1,
+        EdgeModel::Parabola => 2,
+        EdgeModel::Conic => 4,
+    };
+    let params = if model == EdgeModel::Conic {
+        5.0
+    } else {
+        degree as f64 + 1.0
+    };
+    let mut gram = Matrix5::zeros();
+    let mut rss = 0.0;
+    for &i in &kept {
+        let u = ((pts[i][0] - mx) * t[0] + (pts[i][1] - my) * t[1]) / scale;
+        let phi = basis(u, degree);
+        gram += phi * phi.transpose();
+        rss += curve.distance(pts[i][0], pts[i][1]).powi(2);
+    }
+    for k in degree + 1..5 {
+        gram[(k, k)] = 1.0;
+    }
+    let inverse = gram.try_inverse()?;
+    if n <= params {
+        return None;
+    }
+    Some(SegmentStats {
+        centre: [mx, my],
+        tangent: t,
+        scale,
+        inverse,
+        degree,
+        s2: rss / (n - params),
+        kept,
+    })
+}
+
+/// A chosen piece for one corner: the curve and its position variance at the corner.
+struct Chosen {
+    curve: Curve,
+    variance: f64,
+}
+
+/// Picks the piece of a line that holds the corner at chain position `cut` (samples before it)
+/// and fits it near the corner: only the piece's samples within `support` px of `p` enter a
+/// robust fit, so the model need only hold over a few squares (a row wrapped around a cylinder
+/// is one conic in theory, but lens distortion or a long, strongly bent arc are not). The piece
+/// with samples on both sides of the corner wins; otherwise the neighbouring piece whose fit has
+/// the smaller position variance at the corner. The fit must keep at least `min_near` samples.
+fn choose_segment(
+    line: &FittedLine,
+    cut: usize,
+    p: [f64; 2],
+    support: f64,
+    min_near: usize,
+) -> Result<Chosen, Fallback> {
+    let candidates = line.segments.iter().filter(|s| {
+        let (a, b) = s.samples;
+        (a < cut && b > cut) || b == cut || a == cut
+    });
+    let mut best: Option<(Chosen, bool)> = None;
+    let (mut enough, mut scratch) = (false, Vec::new());
+    for seg in candidates {
+        let (a, b) = seg.samples;
+        let inside = |i: &usize| dist(line.samples[*i], p) <= support;
+        let (Some(lo), Some(hi)) = ((a..b).find(inside), (a..b).rev().find(inside)) else {
+            continue;
+        };
+        if hi + 1 - lo < min_near {
+            continue;
+        }
+        enough = true;
+        let Some((curve, _, _, st)) = robust_fit(&line.samples, lo..hi + 1, &mut scratch) else {
+            continue;
+        };
+        if st.kept.len() < min_near {
+            continue;
+        }
+        let variance = st.variance_at(p);
+        if !variance.is_finite() {
+            continue;
+        }
+        let straddles = a < cut && b > cut;
+        let better = match &best {
+            None => true,
+            Some((b, bs)) => (straddles && !bs) || (straddles == *bs && variance < b.variance),
+        };
+        if better {
+            best = Some((Chosen { curve, variance }, straddles));
+        }
+    }
+    match best {
+        Some((c, _)) => Ok(c),
+        None if enough => Err(Fallback::FitFailed),
+        None => Err(Fallback::FewSamples),
+    }
+}
+
+/// Unit normal of a curve at `p`.
+fn curve_normal(c: &Curve, p: [f64; 2]) -> Option<[f64; 2]> {
+    match c {
+        Curve::Line(l) => Some(l.normal()),
+        Curve::Conic(q) => normalize(q.gradient(p[0], p[1])),
+    }
+}
+
+fn intersect_corner(
+    row: i32,
+    col: i32,
+    local: [f64; 2],
+    a: Chosen,
+    b: Chosen,
+    params: &BoardFitParams,
+) -> FittedCorner {
+    let fallback = |why| local_corner(row, col, local, why, params);
+    let Some(p) = nearest_intersection(&a.curve, &b.curve, local) else {
+        return fallback(Fallback::NoIntersection);
+    };
+    if !(p[0].is_finite() && p[1].is_finite()) {
+        return fallback(Fallback::NoIntersection);
+    }
+    if dist(p, local) > params.max_shift {
+        return fallback(Fallback::TooFar);
+    }
+    let (Some(n1), Some(n2)) = (curve_normal(&a.curve, p), curve_normal(&b.curve, p)) else {
+        return fallback(Fallback::NoIntersection);
+    };
+    let det = n1[0] * n2[1] - n1[1] * n2[0];
+    if det.abs() < params.min_angle_deg.to_radians().sin() {
+        return fallback(Fallback::Tangent);
+    }
+    // N⁻¹ for N = [n1ᵀ; n2ᵀ]; its columns map a shift of each curve to the corner's shift.
+    let inv = [[n2[1] / det, -n1[1] / det], [-n2[0] / det, n1[0] / det]];
+    let (v1, v2) = (a.variance, b.variance);
+    let s2 = params.systematic_sigma.max(0.0).powi(2);
+    let mut cov = [[0.0; 2]; 2];
+    for (r, row_c) in cov.iter_mut().enumerate() {
+        for (c, v) in row_c.iter_mut().enumerate() {
+            *v = inv[r][0] * inv[c][0] * v1
+                + inv[r][1] * inv[c][1] * v2
+                + if r == c { s2 } else { 0.0 };
+        }
+    }
+    let (tr, dt) = (
+        cov[0][0] + cov[1][1],
+        cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0],
+    );
+    let big = 0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt();
+    if !big.is_finite() {
+        return fallback(Fallback::FitFailed);
+    }
+    FittedCorner {
+        row,
+        col,
+        x: p[0],
+        y: p[1],
+        path: Path::Board,
+        fallback: None,
+        cov,
+        sigma: big.sqrt(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::DetectedCorner;
+    use crate::refine::{refine_one, RefineParams, Status};
+    use crate::synth::board::{
+        BoardCorner, BoardScene, Occluder, PinholeCamera, RenderedBoard, Surface,
+    };
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+
+    fn camera() -> PinholeCamera {
+        PinholeCamera {
+            width: 960,
+            height: 640,
+            cx: 479.5,
+            cy: 319.5,
+            ..PinholeCamera::default()
+        }
+    }
+
+    /// A 7×9-corner board of 20 mm squares, 600 mm away, turned a little (so no edge is aligned
+    /// with the pixel grid) and tilted by `tilt_deg` about the image x axis.
+    fn scene(surface: Surface, blur: f64, noise: f64, tilt_deg: f64) -> BoardScene {
+        let rot = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt_deg.to_radians())
+            * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 7f64.to_radians());
+        BoardScene {
+            rows: 7,
+            cols: 9,
+            surface,
+            camera: camera(),
+            pose: Isometry3::from_parts(Translation3::new(0.0, 0.0, 600.0), rot),
+            blur,
+            noise,
+            supersample: 8,
+            ..BoardScene::default()
+        }
+    }
+
+    /// A board labelled from the truth, positions perturbed by N(0, 0.2 px) per axis like a local
+    /// refiner's answer.
+    fn board_from_truth(truth: &[BoardCorner], seed: u64) -> Board {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let n = Normal::new(0.0, 0.2).unwrap();
+        let corners: Vec<DetectedCorner> = truth
+            .iter()
+            .filter(|c| c.visible)
+            .map(|c| DetectedCorner {
+                x: c.x + n.sample(&mut rng),
+                y: c.y + n.sample(&mut rng),
+                row: c.row as i32,
+                col: c.col as i32,
+                score: 1.0,
+                status: Status::Converged,
+                residual: None,
+            })
+            .collect();
+        Board {
+            rows: 1 + corners.iter().map(|c| c.row as usize).max().unwrap_or(0),
+            cols: 1 + corners.iter().map(|c| c.col as usize).max().unwrap_or(0),
+            corners,
+        }
+    }
+
+    fn truth_of<'a>(truth: &'a [BoardCorner], c: &FittedCorner) -> &'a BoardCorner {
+        truth
+            .iter()
+            .find(|t| t.row as i32 == c.row && t.col as i32 == c.col)
+            .unwrap()
+    }
+
+    struct Stats {
+        /// (|κ|max, error, per-axis normalized errors) of board-path corners.
+        board: Vec<(f64, f64, [f64; 2])>,
+        local: usize,
+    }
+
+    fn run(r: &RenderedBoard, seed: u64) -> (Board, Vec<FittedCorner>, Stats) {
+        let board = board_from_truth(&r.corners, seed);
+        let fitted = fit_board(&r.image, &board, &BoardFitParams::default());
+        assert_eq!(fitted.len(), board.corners.len());
+        let mut st = Stats {
+            board: Vec::new(),
+            local: 0,
+        };
+        for (f, b) in fitted.iter().zip(&board.corners) {
+            assert_eq!((f.row, f.col), (b.row, b.col));
+            assert!(f.x.is_finite() && f.y.is_finite() && f.sigma.is_finite() && f.sigma > 0.0);
+            let t = truth_of(&r.corners, f);
+            match f.path {
+                Path::Board => {
+                    let e = [f.x - t.x, f.y - t.y];
+                    let k = t.curvature[0].abs().max(t.curvature[1].abs());
+                    st.board.push((
+                        k,
+                        e[0].hypot(e[1]),
+                        [e[0] / f.cov[0][0].sqrt(), e[1] / f.cov[1][1].sqrt()],
+                    ));
+                }
+                Path::Local => st.local += 1,
+            }
+        }
+        (board, fitted, st)
+    }
+
+    fn rms(v: impl Iterator<Item = f64>) -> (f64, usize) {
+        let (s, n) = v.fold((0.0, 0), |(s, n), e| (s + e * e, n + 1));
+        ((s / n.max(1) as f64).sqrt(), n)
+    }
+
+    /// Local refiner's RMS error on the same corners (reach bounded by the square like detect).
+    fn local_rms(
+        r: &RenderedBoard,
+        board: &Board,
+        filter: impl Fn(&BoardCorner) -> bool,
+    ) -> (f64, usize) {
+        let errs: Vec<f64> = board
+            .corners
+            .iter()
+            .filter_map(|c| {
+                let t = r
+                    .corners
+                    .iter()
+                    .find(|t| t.row as i32 == c.row && t.col as i32 == c.col)?;
+                if !filter(t) {
+                    return None;
+                }
+                let p = RefineParams {
+                    reach: 60.0,
+                    ..RefineParams::default()
+                };
+                let q = refine_one(&r.image, [c.x, c.y], &p);
+                (q.status == Status::Converged).then(|| (q.x - t.x).hypot(q.y - t.y))
+            })
+            .collect();
+        rms(errs.into_iter())
+    }
+
+    #[test]
+    fn flat_board_is_accurate() {
+        let r = scene(Surface::Flat, 1.0, 0.008, 20.0).render(1).unwrap();
+        let (_, _, st) = run(&r, 1);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        assert!(n >= 55 && st.local <= 4, "{n} board, {} local", st.local);
+        assert!(e < 0.02, "flat RMS {e}");
+    }
+
+    #[test]
+    fn cylinder_error_does_not_grow_with_curvature() {
+        let r = scene(Surface::Cylinder { radius_mm: 60.0 }, 1.0, 0.008, 15.0)
+            .render(2)
+            .unwrap();
+        let (_, _, st) = run(&r, 2);
+        let (lo, nlo) = rms(st.board.iter().filter(|b| b.0 < 2e-3).map(|b| b.1));
+        let (hi, nhi) = rms(st.board.iter().filter(|b| b.0 >= 6e-3).map(|b| b.1));
+        assert!(nlo >= 5 && nhi >= 5, "{nlo} low, {nhi} high");
+        // Measured: high-curvature corners 0.012 px; the low-curvature ones of this board are the
+        // foreshortened ones near the cylinder's silhouette (0.05 px, a known weakness).
+        assert!(lo < 0.07 && hi < 0.035, "low {lo}, high {hi}");
+    }
+
+    #[test]
+    fn s_shape_is_accurate() {
+        let r = scene(Surface::SShape { radius_mm: 80.0 }, 1.0, 0.008, 10.0)
+            .render(3)
+            .unwrap();
+        let (_, _, st) = run(&r, 3);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        assert!(n >= 40, "{n} board, {} local", st.local);
+        assert!(e < 0.04, "S RMS {e}");
+    }
+
+    #[test]
+    fn occluder_across_edges_does_not_pull_corners() {
+        let mut s = scene(Surface::Cylinder { radius_mm: 100.0 }, 1.0, 0.008, 10.0);
+        s.occluders = vec![
+            Occluder {
+                from: [300.0, 150.0],
+                to: [700.0, 480.0],
+                width: 6.0,
+                intensity: 0.05,
+            },
+            Occluder {
+                from: [380.0, 420.0],
+                to: [420.0, 380.0],
+                width: 3.0,
+                intensity: 0.95,
+            },
+        ];
+        let r = s.render(4).unwrap();
+        let (_, _, st) = run(&r, 4);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        let worst = st.board.iter().map(|b| b.1).fold(0.0, f64::max);
+        assert!(n >= 40, "{n}");
+        assert!(e < 0.03 && worst < 0.1, "RMS {e}, worst {worst}");
+    }
+
+    #[test]
+    fn degenerate_boards_fall_back_without_panic() {
+        let r = scene(Surface::Flat, 1.0, 0.008, 20.0).render(5).unwrap();
+        let p = BoardFitParams::default();
+        let empty = Board {
+            rows: 0,
+            cols: 0,
+            corners: Vec::new(),
+        };
+        assert!(fit_board(&r.image, &empty, &p).is_empty());
+        let good = board_from_truth(&r.corners, 5);
+        let check = |b: &Board| {
+            let f = fit_board_with_curves(&r.image, b, &p);
+            assert_eq!(f.corners.len(), b.corners.len());
+            for (c, b) in f.corners.iter().zip(&b.corners) {
+                // A local answer is the input position, whatever it is.
+                assert!(c.sigma.is_finite());
+                assert!(
+                    c.x.is_finite() && c.y.is_finite()
+                        || c.path == Path::Local && (c.x, c.y) == (b.x, b.y)
+                        || b.x.is_nan()
+                        || b.y.is_nan()
+                );
+                assert_eq!(c.path == Path::Local, c.fallback.is_some());
+            }
+            f
+        };
+        // A single corner, two corners (one segment, no crossing line), all corners on one point.
+        let one = Board {
+            corners: good.corners[..1].to_vec(),
+            ..good.clone()
+        };
+        assert_eq!(check(&one).corners[0].fallback, Some(Fallback::NoLine));
+        let two = Board {
+            corners: good.corners[..2].to_vec(),
+            ..good.clone()
+        };
+        assert!(check(&two)
+            .corners
+            .iter()
+            .all(|c| c.fallback == Some(Fallback::NoLine)));
+        let mut same = good.clone();
+        for c in &mut same.corners {
+            (c.x, c.y) = (400.0, 300.0);
+        }
+        assert!(check(&same).corners.iter().all(|c| c.path == Path::Local));
+        // Non-finite and off-image corners, duplicate labels.
+        let mut bad = good.clone();
+        bad.corners[3].x = f64::NAN;
+        bad.corners[10].y = 1e9;
+        let dup = bad.corners[20];
+        bad.corners.push(dup);
+        let f = check(&bad);
+        assert_eq!(f.corners[3].fallback, Some(Fallback::NoLine));
+        // A uniform image: no edge anywhere.
+        let flat = GrayImage::from_vec(960, 640, vec![0.5; 960 * 640]).unwrap();
+        let f = fit_board_with_curves(&flat, &good, &p);
+        assert!(f.corners.iter().all(|c| c.path == Path::Local));
+    }
+
+    #[test]
+    fn tangent_and_missing_intersections_fall_back() {
+        use crate::quadratic_form::Line;
+        let p = BoardFitParams::default();
+        let chosen = |l: Line| Chosen {
+            curve: Curve::Line(l),
+            variance: 1e-4,
+        };
+        let h = Line::new(0.0, 1.0, -10.0).unwrap();
+        let nearly = Line::through([0.0, 10.0], [100.0, 11.0]).unwrap();
+        let parallel = Line::new(0.0, 1.0, -12.0).unwrap();
+        let v = Line::new(1.0, 0.0, -5.0).unwrap();
+        let c = intersect_corner(0, 0, [0.5, 10.0], chosen(h), chosen(nearly), &p);
+        assert_eq!(c.fallback, Some(Fallback::Tangent));
+        let c = intersect_corner(0, 0, [5.0, 10.0], chosen(h), chosen(parallel), &p);
+        assert_eq!(c.fallback, Some(Fallback::NoIntersection));
+        let c = intersect_corner(0, 0, [5.0, 13.0], chosen(h), chosen(v), &p);
+        assert_eq!(c.fallback, Some(Fallback::TooFar));
+        let c = intersect_corner(0, 0, [5.2, 10.1], chosen(h), chosen(v), &p);
+        assert_eq!((c.path, c.x, c.y), (Path::Board, 5.0, 10.0));
+        // Perpendicular lines, σ = 0.01 px each, plus σ_sys: cov = (1e-4 + 2.5e-5) I.
+        assert!((c.cov[0][0] - 1.25e-4).abs() < 1e-12 && c.cov[0][1].abs() < 1e-12);
+        // Collinear samples cannot carry a conic: a short piece of three identical points fails.
+        let pts = vec![[1.0, 1.0]; 10];
+        assert!(robust_fit(&pts, 0..10, &mut Vec::new()).is_none());
+    }
+
+    /// Time of detect vs fit_board on a 1920×1200 image with a 9×9 board; run with
+    /// `--ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn timing_report() {
+        use crate::detect::{detect, DetectParams};
+        let s = BoardScene {
+            blur: 1.0,
+            noise: 0.01,
+            supersample: 4,
+            surface: Surface::Cylinder { radius_mm: 150.0 },
+            ..BoardScene::default()
+        };
+        let r = s.render(0).unwrap();
+        let params = DetectParams::default();
+        let _ = detect(&r.image, &params);
+        let t = std::time::Instant::now();
+        let det = detect(&r.image, &params);
+        let det_ms = t.elapsed().as_secs_f64() * 1e3;
+        let Some(board) = det.boards.first() else {
+            println!("no board detected");
+            return;
+        };
+        let t = std::time::Instant::now();
+        let n = 5;
+        for _ in 0..n {
+            std::hint::black_box(fit_board(&r.image, board, &BoardFitParams::default()));
+        }
+        let fit_ms = t.elapsed().as_secs_f64() * 1e3 / n as f64;
+        println!(
+            "{} corners: detect {det_ms:.1} ms, fit_board {fit_ms:.1} ms",
+            board.corners.len()
+        );
+    }
+
+    /// Measures accuracy, coverage of σ and the local refiner on the same images; run with
+    /// `--ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn accuracy_report() {
+        let cases = [
+            ("flat", Surface::Flat),
+            ("cyl200", Surface::Cylinder { radius_mm: 200.0 }),
+            ("cyl60", Surface::Cylinder { radius_mm: 60.0 }),
+            (
+                "ell",
+                Surface::EllipticColumn {
+                    a_mm: 60.0,
+                    b_mm: 90.0,
+                },
+            ),
+            ("S80", Surface::SShape { radius_mm: 80.0 }),
+        ];
+        let mut all_norm = Vec::new();
+        let mut bins = [(0.0, 0usize, 0.0, 0usize); 3];
+        for (name, surface) in cases {
+            for (blur, noise) in [(0.7, 0.0), (1.0, 0.008), (1.2, 0.008)] {
+                for seed in 0..3u64 {
+                    let r = scene(surface, blur, noise, 10.0 + 5.0 * seed as f64)
+                        .render(seed)
+                        .unwrap();
+                    let t0 = std::time::Instant::now();
+                    let (board, _, st) = run(&r, seed);
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let (e, n) = rms(st.board.iter().map(|b| b.1));
+                    let (le, ln) = local_rms(&r, &board, |_| true);
+                    for b in &st.board {
+                        all_norm.extend(b.2);
+                        let k = if b.0 < 2e-3 {
+                            0
+                        } else if b.0 < 6e-3 {
+                            1
+                        } else {
+                            2
+                        };
+                        bins[k].0 += b.1 * b.1;
+                        bins[k].1 += 1;
+                    }
+                    for (k, lo, hi) in [(0, 0.0, 2e-3), (1, 2e-3, 6e-3), (2, 6e-3, 1.0)] {
+                        let (le, ln) = local_rms(&r, &board, |t| {
+                            let c = t.curvature[0].abs().max(t.curvature[1].abs());
+                            c >= lo && c < hi
+                        });
+                        bins[k].2 += le * le * ln as f64;
+                        bins[k].3 += ln;
+                    }
+                    let cover = st
+                        .board
+                        .iter()
+                        .flat_map(|b| b.2)
+                        .filter(|z| z.abs() <= 1.0)
+                        .count() as f64
+                        / (2 * st.board.len()).max(1) as f64;
+                    println!(
+                        "{name} blur {blur} noise {noise} seed {seed}: board {e:.4} px ({n}, {} local), local refiner {le:.4} ({ln}), 1σ cover {cover:.2}, {ms:.1} ms",
+                        st.local
+                    );
+                }
+            }
+        }
+        for (k, b) in bins.iter().enumerate() {
+            println!(
+                "curvature bin {k}: board RMS {:.4} ({}), local RMS {:.4} ({})",
+                (b.0 / b.1.max(1) as f64).sqrt(),
+                b.1,
+                (b.2 / b.3.max(1) as f64).sqrt(),
+                b.3
+            );
+        }
+        let within =
+            all_norm.iter().filter(|z| z.abs() <= 1.0).count() as f64 / all_norm.len() as f64;
+        let within2 =
+            all_norm.iter().filter(|z| z.abs() <= 2.0).count() as f64 / all_norm.len() as f64;
+        println!(
+            "per-axis |error| ≤ 1σ: {within:.3}, ≤ 2σ: {within2:.3} over {}",
+            all_norm.len()
+        );
+    }
+}
