@@ -3,7 +3,7 @@
 use crate::draw::draw_detection;
 use crate::RefineOptions;
 use clap::Args;
-use conic_corners::detect::{detect, DetectParams, Detection};
+use conic_corners::detect::{detect, DetectParams, Detection, RefineMode};
 use conic_corners::GrayImage;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -32,6 +32,10 @@ pub struct DetectArgs {
     /// Write one overlay per input image into DIR (named after the input, as PNG).
     #[arg(long, value_name = "DIR")]
     draw_dir: Option<PathBuf>,
+    /// How corners are placed: `local` (single-corner refiner) or `board` (row and column curves
+    /// fitted along the whole board, local where a line has too few samples).
+    #[arg(long = "refine", value_name = "MODE", default_value = "local", value_parser = ["local", "board"])]
+    mode: String,
     /// Print CSV rows (image,board,row,col,x,y,score,status) instead of JSON.
     #[arg(long)]
     csv: bool,
@@ -56,6 +60,11 @@ impl DetectArgs {
         }
         params.labels.min_corners = self.min_board_corners;
         params.refine = self.refine.to_params()?;
+        params.mode = if self.mode == "board" {
+            RefineMode::Board
+        } else {
+            RefineMode::Local
+        };
         params.validate()?;
         Ok(params)
     }
@@ -73,7 +82,8 @@ pub fn detection_json(path: &Path, image: &GrayImage, det: &Detection) -> serde_
                 .map(|c| {
                     json!({
                         "x": c.x, "y": c.y, "row": c.row, "col": c.col, "score": c.score,
-                        "status": c.status, "residual": c.residual,
+                        "status": c.status, "residual": c.residual, "path": c.path,
+                        "sigma": c.sigma,
                     })
                 })
                 .collect();

@@ -3,6 +3,7 @@
 //!
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
+use crate::board_fit::{fit_board, BoardFitParams, Path};
 use crate::connectivity::{connect, label_with, ConnectivityParams, LabelParams};
 use crate::election::{elect, Corner, ElectionParams};
 use crate::prefilter::{prefilter, PrefilterParams};
@@ -25,6 +26,21 @@ pub struct DetectParams {
     /// Subpixel refinement of each corner; its `reach` is further bounded by the corner's
     /// distance to its farthest grid neighbour.
     pub refine: RefineParams,
+    /// How corners are finally placed.
+    pub mode: RefineMode,
+    /// Board-wide fitting (III-D to III-F along whole grid lines), for [`RefineMode::Board`].
+    pub board_fit: BoardFitParams,
+}
+
+/// How [`detect`] places the corners after the pixel-level detection.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RefineMode {
+    /// Each corner by the single-corner refiner ([`crate::refine`]).
+    #[default]
+    Local,
+    /// Each corner as the intersection of its row and column curves fitted along the whole board
+    /// ([`crate::board_fit`]), the local answer where a line has too few samples.
+    Board,
 }
 
 impl DetectParams {
@@ -60,6 +76,11 @@ pub struct DetectedCorner {
     pub status: Status,
     /// RMS distance (px) of the edge samples to their curves; `None` when not refined.
     pub residual: Option<f64>,
+    /// Which refiner placed the corner.
+    pub path: Path,
+    /// Standard deviation (px) of the position in its worst direction, from the board-wide fit's
+    /// residuals; `None` in [`RefineMode::Local`].
+    pub sigma: Option<f64>,
 }
 
 /// A board: its labelled corners, sorted by `(row, col)`.
@@ -82,8 +103,10 @@ pub struct Timing {
     pub election: f64,
     /// Delaunay connectivity and labels.
     pub connectivity: f64,
-    /// Subpixel refinement.
+    /// Subpixel refinement of each corner.
     pub refine: f64,
+    /// Board-wide fitting ([`RefineMode::Board`] only).
+    pub board_fit: f64,
     /// The whole of [`detect`].
     pub total: f64,
 }
@@ -116,7 +139,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     let labelled = label_with(&corners, &graph, &params.labels);
     let connectivity_ms = ms(t);
     let t = Instant::now();
-    let boards = labelled
+    let boards: Vec<Board> = labelled
         .iter()
         .map(|b| {
             let refined: Vec<DetectedCorner> = b
@@ -136,6 +159,25 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
         })
         .collect();
     let refine_ms = ms(t);
+    let t = Instant::now();
+    let boards = match params.mode {
+        RefineMode::Local => boards,
+        RefineMode::Board => boards
+            .into_iter()
+            .map(|mut b| {
+                let fitted = fit_board(image, &b, &params.board_fit);
+                for (c, f) in b.corners.iter_mut().zip(fitted) {
+                    if f.path == Path::Board {
+                        (c.x, c.y) = (f.x, f.y);
+                        c.path = Path::Board;
+                        c.sigma = Some(f.sigma);
+                    }
+                }
+                b
+            })
+            .collect(),
+    };
+    let board_fit_ms = ms(t);
     Detection {
         boards,
         timing: Timing {
@@ -143,6 +185,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             election: election_ms,
             connectivity: connectivity_ms,
             refine: refine_ms,
+            board_fit: board_fit_ms,
             total: ms(t0),
         },
     }
@@ -180,5 +223,7 @@ fn refine_corner(
         score: c.score,
         status: r.status,
         residual: r.residual,
+        path: Path::Local,
+        sigma: None,
     }
 }
