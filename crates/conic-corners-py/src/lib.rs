@@ -16,7 +16,7 @@ use conic_corners::refine::{refine as refine_rs, RefineParams, Status};
 use conic_corners::GrayImage;
 use numpy::ndarray::{Array1, Array2};
 use numpy::{
-    Element, IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray,
+    Element, IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
     PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
@@ -45,16 +45,16 @@ enum Pixels {
     F32(Vec<f32>),
 }
 
-/// The values of `arr` in logical order when its dtype is `T`; `None` for another dtype.
-fn values_of<T: Element + Copy>(arr: &Bound<'_, PyUntypedArray>) -> PyResult<Option<Vec<T>>> {
-    let Ok(typed) = arr.cast::<PyArrayDyn<T>>() else {
-        return Ok(None);
-    };
+/// The values of `arr`, whose dtype is known to be `T`, in logical order.
+fn values_of<T: Element + Copy>(arr: &Bound<'_, PyUntypedArray>) -> PyResult<Vec<T>> {
+    let typed = arr
+        .cast::<PyArrayDyn<T>>()
+        .map_err(|e| PyTypeError::new_err(e.to_string()))?;
     let view = typed
         .try_readonly()
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     // `iter` walks any stride pattern (negative, transposed, sliced) in logical order.
-    Ok(Some(view.as_array().iter().copied().collect()))
+    Ok(view.as_array().iter().copied().collect())
 }
 
 /// Copies a numpy image (2-D grey, or H×W×3 / H×W×4 colour; uint8, uint16, float32 or float64)
@@ -68,6 +68,23 @@ fn gray_from_numpy(image: &Bound<'_, PyAny>, bgr: bool) -> PyResult<GrayImage> {
             type_name(image)
         ))
     })?;
+    // The dtype is checked first: a wrong type is a TypeError whatever the shape.
+    let py = arr.py();
+    let dtype = arr.dtype();
+    let depth = if dtype.is_equiv_to(&numpy::dtype::<u8>(py)) {
+        0
+    } else if dtype.is_equiv_to(&numpy::dtype::<u16>(py)) {
+        1
+    } else if dtype.is_equiv_to(&numpy::dtype::<f32>(py)) {
+        2
+    } else if dtype.is_equiv_to(&numpy::dtype::<f64>(py)) {
+        3
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "image dtype must be uint8, uint16, float32 or float64 (native byte order), got {}",
+            dtype_name(arr)
+        )));
+    };
     let shape = arr.shape().to_vec();
     let channels = match shape.len() {
         2 => 1,
@@ -95,19 +112,16 @@ fn gray_from_numpy(image: &Bound<'_, PyAny>, bgr: bool) -> PyResult<GrayImage> {
             conic_corners::image::MAX_PIXELS
         )));
     }
-    let pixels = if let Some(v) = values_of::<u8>(arr)? {
-        Pixels::U8(v)
-    } else if let Some(v) = values_of::<u16>(arr)? {
-        Pixels::U16(v)
-    } else if let Some(v) = values_of::<f32>(arr)? {
-        Pixels::F32(v)
-    } else if let Some(v) = values_of::<f64>(arr)? {
-        Pixels::F32(v.into_iter().map(|x| x as f32).collect())
-    } else {
-        return Err(PyTypeError::new_err(format!(
-            "image dtype must be uint8, uint16, float32 or float64 (native byte order), got {}",
-            dtype_name(arr)
-        )));
+    let pixels = match depth {
+        0 => Pixels::U8(values_of::<u8>(arr)?),
+        1 => Pixels::U16(values_of::<u16>(arr)?),
+        2 => Pixels::F32(values_of::<f32>(arr)?),
+        _ => Pixels::F32(
+            values_of::<f64>(arr)?
+                .into_iter()
+                .map(|x| x as f32)
+                .collect(),
+        ),
     };
     if let Pixels::F32(v) = &pixels {
         if !v.iter().all(|x| x.is_finite()) {
@@ -141,12 +155,24 @@ fn colour_image(w: u32, h: u32, channels: usize, pixels: Pixels, bgr: bool) -> i
     }
     const SIZE: &str = "buffer length is w·h·channels";
     match (pixels, channels) {
-        (Pixels::U8(v), 3) => D::ImageRgb8(ImageBuffer::from_raw(w, h, swap(v, 3, bgr)).expect(SIZE)),
-        (Pixels::U8(v), _) => D::ImageRgba8(ImageBuffer::from_raw(w, h, swap(v, 4, bgr)).expect(SIZE)),
-        (Pixels::U16(v), 3) => D::ImageRgb16(ImageBuffer::from_raw(w, h, swap(v, 3, bgr)).expect(SIZE)),
-        (Pixels::U16(v), _) => D::ImageRgba16(ImageBuffer::from_raw(w, h, swap(v, 4, bgr)).expect(SIZE)),
-        (Pixels::F32(v), 3) => D::ImageRgb32F(ImageBuffer::from_raw(w, h, swap(v, 3, bgr)).expect(SIZE)),
-        (Pixels::F32(v), _) => D::ImageRgba32F(ImageBuffer::from_raw(w, h, swap(v, 4, bgr)).expect(SIZE)),
+        (Pixels::U8(v), 3) => {
+            D::ImageRgb8(ImageBuffer::from_raw(w, h, swap(v, 3, bgr)).expect(SIZE))
+        }
+        (Pixels::U8(v), _) => {
+            D::ImageRgba8(ImageBuffer::from_raw(w, h, swap(v, 4, bgr)).expect(SIZE))
+        }
+        (Pixels::U16(v), 3) => {
+            D::ImageRgb16(ImageBuffer::from_raw(w, h, swap(v, 3, bgr)).expect(SIZE))
+        }
+        (Pixels::U16(v), _) => {
+            D::ImageRgba16(ImageBuffer::from_raw(w, h, swap(v, 4, bgr)).expect(SIZE))
+        }
+        (Pixels::F32(v), 3) => {
+            D::ImageRgb32F(ImageBuffer::from_raw(w, h, swap(v, 3, bgr)).expect(SIZE))
+        }
+        (Pixels::F32(v), _) => {
+            D::ImageRgba32F(ImageBuffer::from_raw(w, h, swap(v, 4, bgr)).expect(SIZE))
+        }
     }
 }
 
@@ -178,7 +204,11 @@ fn int_at_least(name: &str, value: Option<i64>, min: i64) -> PyResult<Option<usi
 }
 
 /// Refinement parameters from the keywords, defaults for the ones not given, validated.
-fn refine_params(reach: Option<f64>, stride: Option<i64>, blur: Option<f64>) -> PyResult<RefineParams> {
+fn refine_params(
+    reach: Option<f64>,
+    stride: Option<i64>,
+    blur: Option<f64>,
+) -> PyResult<RefineParams> {
     let defaults = RefineParams::default();
     let params = RefineParams {
         reach: reach.unwrap_or(defaults.reach),
@@ -282,25 +312,29 @@ fn refine<'py>(
             type_name(points)
         ))
     })?;
+    let dtype = arr.dtype();
+    let is_f32 = dtype.is_equiv_to(&numpy::dtype::<f32>(py));
+    if !(is_f32 || dtype.is_equiv_to(&numpy::dtype::<f64>(py))) {
+        return Err(PyTypeError::new_err(format!(
+            "points dtype must be float32 or float64, got {}",
+            dtype_name(arr)
+        )));
+    }
     let shape = arr.shape().to_vec();
-    let shape_ok = matches!(shape.as_slice(), [_, 2] | [_, 1, 2]);
-    if !shape_ok {
+    if !matches!(shape.as_slice(), [_, 2] | [_, 1, 2]) {
         return Err(PyValueError::new_err(format!(
             "points must be N×2 or N×1×2, got shape {shape:?}"
         )));
     }
     if shape[0] == 0 {
-        return Err(PyValueError::new_err("points is empty (no corner to refine)"));
+        return Err(PyValueError::new_err(
+            "points is empty (no corner to refine)",
+        ));
     }
-    let (starts, is_f32): (Vec<f64>, bool) = if let Some(v) = values_of::<f64>(arr)? {
-        (v, false)
-    } else if let Some(v) = values_of::<f32>(arr)? {
-        (v.into_iter().map(f64::from).collect(), true)
+    let starts: Vec<f64> = if is_f32 {
+        values_of::<f32>(arr)?.into_iter().map(f64::from).collect()
     } else {
-        return Err(PyTypeError::new_err(format!(
-            "points dtype must be float32 or float64, got {}",
-            dtype_name(arr)
-        )));
+        values_of::<f64>(arr)?
     };
     let starts: Vec<[f64; 2]> = starts.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
     if let Some(i) = starts.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
