@@ -71,14 +71,17 @@ fn gray_from_numpy(image: &Bound<'_, PyAny>, bgr: bool) -> PyResult<GrayImage> {
     // The dtype is checked first: a wrong type is a TypeError whatever the shape.
     let py = arr.py();
     let dtype = arr.dtype();
-    let depth = if dtype.is_equiv_to(&numpy::dtype::<u8>(py)) {
-        0
-    } else if dtype.is_equiv_to(&numpy::dtype::<u16>(py)) {
-        1
-    } else if dtype.is_equiv_to(&numpy::dtype::<f32>(py)) {
-        2
-    } else if dtype.is_equiv_to(&numpy::dtype::<f64>(py)) {
-        3
+    let is = |other: Bound<'_, numpy::PyArrayDescr>| dtype.is_equiv_to(&other);
+    let read = if is(numpy::dtype::<u8>(py)) {
+        |a: &Bound<'_, PyUntypedArray>| values_of::<u8>(a).map(Pixels::U8)
+    } else if is(numpy::dtype::<u16>(py)) {
+        |a: &Bound<'_, PyUntypedArray>| values_of::<u16>(a).map(Pixels::U16)
+    } else if is(numpy::dtype::<f32>(py)) {
+        |a: &Bound<'_, PyUntypedArray>| values_of::<f32>(a).map(Pixels::F32)
+    } else if is(numpy::dtype::<f64>(py)) {
+        |a: &Bound<'_, PyUntypedArray>| {
+            values_of::<f64>(a).map(|v| Pixels::F32(v.into_iter().map(|x| x as f32).collect()))
+        }
     } else {
         return Err(PyTypeError::new_err(format!(
             "image dtype must be uint8, uint16, float32 or float64 (native byte order), got {}",
@@ -112,17 +115,7 @@ fn gray_from_numpy(image: &Bound<'_, PyAny>, bgr: bool) -> PyResult<GrayImage> {
             conic_corners::image::MAX_PIXELS
         )));
     }
-    let pixels = match depth {
-        0 => Pixels::U8(values_of::<u8>(arr)?),
-        1 => Pixels::U16(values_of::<u16>(arr)?),
-        2 => Pixels::F32(values_of::<f32>(arr)?),
-        _ => Pixels::F32(
-            values_of::<f64>(arr)?
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
-        ),
-    };
+    let pixels = read(arr)?;
     if let Pixels::F32(v) = &pixels {
         if !v.iter().all(|x| x.is_finite()) {
             return Err(PyValueError::new_err(
@@ -144,7 +137,7 @@ fn gray_from_numpy(image: &Bound<'_, PyAny>, bgr: bool) -> PyResult<GrayImage> {
 }
 
 /// Rebuilds the colour image the CLI would have decoded from a file, so that the `image` crate's
-/// conversion to luma applies unchanged. `values.len()` is `w · h · channels`.
+/// conversion to luma applies unchanged. `pixels` holds `w · h · channels` values.
 fn colour_image(w: u32, h: u32, channels: usize, pixels: Pixels, bgr: bool) -> image::DynamicImage {
     use image::{DynamicImage as D, ImageBuffer};
     fn swap<T>(mut v: Vec<T>, channels: usize, bgr: bool) -> Vec<T> {
