@@ -1092,6 +1092,8 @@ mod tests {
                 score: 1.0,
                 status: Status::Converged,
                 residual: None,
+                path: Path::Local,
+                sigma: None,
             })
             .collect();
         Board {

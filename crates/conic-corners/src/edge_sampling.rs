@@ -970,10 +970,14 @@ mod tests {
         ) {
             let (lo, hi) = if flip { (1.0, 0.0) } else { (0.0, 1.0) };
             let base = profile(25, e, sigma, lo, hi);
-            let scaled: Vec<f32> = base.iter().map(|&v| (v as f64 * gain + bias) as f32).collect();
+            // The offset is in units of the contrast: an f32 holds ~7 digits, so an offset 10⁵ times
+            // the contrast would quantize the profile itself.
+            let scaled: Vec<f32> = base.iter().map(|&v| ((v as f64 + bias) * gain) as f32).collect();
             let f0 = fit_sigmoid(&base, None).unwrap();
             let f1 = fit_sigmoid(&scaled, None).unwrap();
-            proptest::prop_assert!((f0.position - e).abs() < 0.005);
+            // The edge is up to 1 px off the window centre, where the logistic-vs-erf mismatch is
+            // up to ~0.006 px at σ = 2.5 (module docs); the property under test is the invariance.
+            proptest::prop_assert!((f0.position - e).abs() < 0.01);
             // f32 rounding of the scaled samples limits the agreement.
             proptest::prop_assert!((f0.position - f1.position).abs() < 2e-3, "{:?} {:?}", f0, f1);
             proptest::prop_assert!((f0.width - f1.width).abs() < 5e-3);

@@ -366,6 +366,23 @@ impl Walks {
             let other = dirs[(k + 1) % 4];
             walk_ray(image, corner, dirs[k], other, cfg, ray);
         }
+        // A ray that found nothing (its start direction was off, typically beside a narrow
+        // sector under strong perspective) is walked again along its edge's other ray, mirrored:
+        // the edge is smooth through the corner.
+        for k in 0..4 {
+            let opposite = &self.rays[(k + 2) % 4];
+            if self.rays[k].len() >= 3 || opposite.len() < 6 {
+                continue;
+            }
+            let near = &opposite[..opposite.len().min(PREDICT_SAMPLES)];
+            let away = dirs[(k + 2) % 4];
+            if let Some((u, _, _)) = local_line(near, away) {
+                let other = dirs[(k + 1) % 4];
+                let mut ray = std::mem::take(&mut self.rays[k]);
+                walk_ray(image, corner, [-u[0], -u[1]], other, cfg, &mut ray);
+                self.rays[k] = ray;
+            }
+        }
     }
 
     /// Blur σ from the median normal width of free-width sigmoid fits at the samples.
