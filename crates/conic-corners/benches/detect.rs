@@ -19,30 +19,16 @@
 use conic_corners::detect::{detect, DetectParams};
 use conic_corners::election::elect;
 use conic_corners::prefilter::{hessian_score, non_maximum_suppression, prefilter};
-use conic_corners::synth::{random_board_scene, BoardScene, Surface};
+use conic_corners::synth::{speed_benchmark_scene, SPEED_BENCHMARK_NOISE_SEED};
 use conic_corners::GrayImage;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use std::path::Path;
 use std::time::Duration;
 
-/// Keep equal to `POSE_SEED` / `NOISE_SEED` of `render-board`.
-const POSE_SEED: u64 = 8;
-const NOISE_SEED: u64 = 8;
-
 fn board_image() -> GrayImage {
-    let template = BoardScene {
-        blur: 1.0,
-        noise: 0.01,
-        ..BoardScene::default()
-    };
-    let scene = random_board_scene(
-        &mut ChaCha8Rng::seed_from_u64(POSE_SEED),
-        Surface::Flat,
-        &template,
-    );
-    let rendered = scene.render(NOISE_SEED).expect("valid scene");
+    let rendered = speed_benchmark_scene()
+        .render(SPEED_BENCHMARK_NOISE_SEED)
+        .expect("valid scene");
     // The same pixels as the PNG the peers read.
     let png = rendered.image.to_luma8(0.0, 1.0);
     GrayImage::from_slice(png.width() as usize, png.height() as usize, png.as_raw())

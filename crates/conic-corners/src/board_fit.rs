@@ -42,7 +42,9 @@
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
 use crate::detect::Board;
-use crate::edge_sampling::{blur_sigma_from_widths, sample_edge_with, Axis, SigmoidParams};
+use crate::edge_sampling::{
+    blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, SigmoidParams,
+};
 use crate::quadratic_form::{fit_edge_curve, nearest_intersection, Curve, EdgeModel};
 use crate::segmentation::{segment_chain, SegmentationParams};
 use crate::GrayImage;
@@ -517,12 +519,8 @@ fn walk_edge(
         let steep = d[1].abs() >= d[0].abs();
         let q = if first_scan {
             anchor
-        } else if steep {
-            let dy = d[1].signum() * cfg.stride as f64;
-            [anchor[0] + d[0] / d[1] * dy, anchor[1] + dy]
         } else {
-            let dx = d[0].signum() * cfg.stride as f64;
-            [anchor[0] + dx, anchor[1] + d[1] / d[0] * dx]
+            next_scanline_point(anchor, d, cfg.stride)
         };
         first_scan = false;
         anchor = q;

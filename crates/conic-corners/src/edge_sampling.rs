@@ -577,6 +577,20 @@ fn scanline_fit(
     Some((first, fit_sigmoid_with(profile, fixed_width, params)?))
 }
 
+/// The point `stride` scanlines on from `anchor` along an edge of direction `d` (not necessarily
+/// unit): rows when the edge is steep (`|d.y| ≥ |d.x|`), columns otherwise, the way
+/// [`sample_edge`] chooses its scanline. Edge walks use it to predict their next sample.
+pub fn next_scanline_point(anchor: [f64; 2], d: [f64; 2], stride: usize) -> [f64; 2] {
+    let s = stride as f64;
+    if d[1].abs() >= d[0].abs() {
+        let dy = d[1].signum() * s;
+        [anchor[0] + d[0] / d[1] * dy, anchor[1] + dy]
+    } else {
+        let dx = d[0].signum() * s;
+        [anchor[0] + dx, anchor[1] + d[1] / d[0] * dx]
+    }
+}
+
 /// Gaussian blur σ (pixels) estimated from logistic widths measured across straight edges of an
 /// image with area-sampled pixels: `σ = √((K · c̃)² − 1/12)` with `c̃` the median of the finite,
 /// positive `normal_widths` (see [`EdgeSample::normal_width`]), `K =` [`LOGISTIC_TO_GAUSSIAN`] and

@@ -22,7 +22,8 @@
 //! centre of the top-left pixel.
 
 use crate::edge_sampling::{
-    blur_sigma_from_widths, sample_edge_with, Axis, EdgeSample, SigmoidParams, LOGISTIC_TO_GAUSSIAN,
+    blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, EdgeSample, SigmoidParams,
+    LOGISTIC_TO_GAUSSIAN,
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
@@ -69,7 +70,7 @@ impl RefineParams {
             return Err(format!("stride must be in 1..=64, got {}", self.stride));
         }
         if let Some(b) = self.blur {
-            if !(b.is_finite() && b >= 0.0 && b <= 20.0) {
+            if !(b.is_finite() && (0.0..=20.0).contains(&b)) {
                 return Err(format!("blur must be in 0..=20 px, got {b}"));
             }
         }
@@ -245,7 +246,7 @@ fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
             (l.min(v), h.max(v))
         });
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     let mid = 0.5 * (lo + hi);
@@ -548,12 +549,8 @@ fn walk_ray(
         let steep = d[1].abs() >= d[0].abs();
         let q = if first_scan {
             anchor
-        } else if steep {
-            let dy = d[1].signum() * cfg.stride as f64;
-            [anchor[0] + d[0] / d[1] * dy, anchor[1] + dy]
         } else {
-            let dx = d[0].signum() * cfg.stride as f64;
-            [anchor[0] + dx, anchor[1] + d[1] / d[0] * dx]
+            next_scanline_point(anchor, d, cfg.stride)
         };
         first_scan = false;
         anchor = q;

@@ -1,26 +1,18 @@
 //! `render-board`: renders the speed benchmark's board image (issue "Board detection", item 8) as
 //! the 8-bit PNG every method of `bench/detect_speed.py` reads, plus its truth as JSON.
 //!
-//! The scene is the one `crates/conic-corners/benches/detect.rs` renders: a flat 9×9-inner-corner
-//! board (the [`BoardScene`] default sheet) seen by the default 1920×1200 camera in the pose
-//! `random_board_scene` draws from `ChaCha8Rng::seed_from_u64(POSE_SEED)`, blur σ = 1 px, noise
-//! σ = 1 % of the 0..1 range (seed `NOISE_SEED`), stored as `round(255 v)`.
+//! The scene is `conic_corners::synth::speed_benchmark_scene`, the one
+//! `crates/conic-corners/benches/detect.rs` renders: a flat 9×9-inner-corner board seen by a
+//! 1920×1200 camera, blur σ = 1 px, noise σ = 1 % of the 0..1 range, stored as `round(255 v)`.
 //!
-//! Truth JSON: `{"width", "height", "rows", "cols", "pose_seed", "noise_seed", "blur", "noise",
+//! Truth JSON: `{"width", "height", "rows", "cols", "noise_seed", "blur", "noise",
 //! "corners": [{"row", "col", "x", "y", "visible"}, ...]}`; coordinates x right, y down, the centre
 //! of the top-left pixel at (0, 0).
 
 use clap::Parser;
-use conic_corners::synth::{random_board_scene, BoardScene, Surface};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use conic_corners::synth::{speed_benchmark_scene, SPEED_BENCHMARK_NOISE_SEED};
 use serde_json::json;
 use std::path::PathBuf;
-
-/// Seed of the board pose; keep equal to the one in `benches/detect.rs`.
-const POSE_SEED: u64 = 8;
-/// Seed of the image noise; keep equal to the one in `benches/detect.rs`.
-const NOISE_SEED: u64 = 8;
 
 #[derive(Parser)]
 #[command(about = "Render the 1920x1200 flat 9x9-corner board of the detection speed benchmark")]
@@ -35,17 +27,10 @@ struct Args {
 
 fn main() -> Result<(), String> {
     let args = Args::parse();
-    let template = BoardScene {
-        blur: 1.0,
-        noise: 0.01,
-        ..BoardScene::default()
-    };
-    let scene = random_board_scene(
-        &mut ChaCha8Rng::seed_from_u64(POSE_SEED),
-        Surface::Flat,
-        &template,
-    );
-    let rendered = scene.render(NOISE_SEED).map_err(|e| e.to_string())?;
+    let scene = speed_benchmark_scene();
+    let rendered = scene
+        .render(SPEED_BENCHMARK_NOISE_SEED)
+        .map_err(|e| e.to_string())?;
     let png = rendered.image.to_luma8(0.0, 1.0);
     png.save(&args.png)
         .map_err(|e| format!("cannot write {}: {e}", args.png.display()))?;
@@ -58,7 +43,7 @@ fn main() -> Result<(), String> {
     let truth = json!({
         "width": scene.camera.width, "height": scene.camera.height,
         "rows": scene.rows, "cols": scene.cols,
-        "pose_seed": POSE_SEED, "noise_seed": NOISE_SEED,
+        "noise_seed": SPEED_BENCHMARK_NOISE_SEED,
         "blur": scene.blur, "noise": scene.noise,
         "corners": corners,
     });

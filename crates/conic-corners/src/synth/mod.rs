@@ -17,8 +17,8 @@ pub mod board;
 pub mod corner;
 
 pub use board::{
-    random_board_scene, BoardCorner, BoardGeometry, BoardScene, Dots, Occluder, PinholeCamera,
-    RenderedBoard, Surface,
+    random_board_scene, speed_benchmark_scene, BoardCorner, BoardGeometry, BoardScene, Dots,
+    Occluder, PinholeCamera, RenderedBoard, Surface, SPEED_BENCHMARK_NOISE_SEED,
 };
 pub use corner::{scene_for, CornerGeometry, CornerScene, Protocol, RenderedCorner};
 
