@@ -516,11 +516,9 @@ pub fn sample_edge_with(
         params,
     )?;
     // The logistic is not the exact profile, so a window off-centre from the edge biases the
-    // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window
-    // when the edge is more than a pixel off (within a pixel the bias is a few thousandths of a
-    // pixel and changes sign with the side, so it averages out along an edge).
+    // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window.
     let found = first.0 + first.1.position;
-    let (start, fit) = if (found - cross.round()).abs() > 1.0 {
+    let (start, fit) = if found.round() != cross.round() {
         scanline_fit(
             image,
             axis,
