@@ -810,13 +810,17 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
         best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
         let solve = |nm: Matrix3<f64>, rhs: Vector3<f64>| nm.cholesky().map(|c| c.solve(&rhs));
         let circle = solve(
-            Matrix3::new(mu[0], mu[1], mu[3], mu[1], mu[2], mu[4], mu[3], mu[4], mu[5]),
+            Matrix3::new(
+                mu[0], mu[1], mu[3], mu[1], mu[2], mu[4], mu[3], mu[4], mu[5],
+            ),
             Vector3::new(mv[0], mv[1], mv[2]),
         )
         .map(|sol| [sol[2], 0.0, sol[2], sol[1], sol[0]]);
         // A parabola too: under strong perspective an edge's conic is far from a circle.
         let parabola = solve(
-            Matrix3::new(mu[0], mu[1], mu[2], mu[1], mu[2], mu[6], mu[2], mu[6], mu[7]),
+            Matrix3::new(
+                mu[0], mu[1], mu[2], mu[1], mu[2], mu[6], mu[2], mu[6], mu[7],
+            ),
             Vector3::new(mv[0], mv[1], mv[3]),
         )
         .map(|sol| [sol[2], 0.0, 0.0, sol[1], sol[0]]);
