@@ -364,9 +364,6 @@ struct BlockMaxima<'a> {
     cols: usize,
     /// Maximum of each block, row-major over the blocks; `−∞` when the block holds only NaN.
     vals: Vec<f32>,
-    /// Pixel index (`y·w + x`) of the first maximum of each block in row-major order; only
-    /// meaningful where `vals > 0`.
-    pos: Vec<u32>,
 }
 
 impl<'a> BlockMaxima<'a> {
@@ -384,9 +381,8 @@ impl<'a> BlockMaxima<'a> {
         );
         let data = score.data();
         let mut vals = vec![f32::NEG_INFINITY; cols * rows];
-        let mut pos = vec![0u32; cols * rows];
         // Column maxima of one block row first (a vectorizable element-wise max, NaN ignored as
-        // by `>`), then the block maxima from them, then the position only of positive blocks.
+        // by `>`), then the block maxima from them; positions are found only when needed.
         let mut colmax = vec![f32::NEG_INFINITY; x_end - margin];
         for (br, by) in (margin..y_end).step_by(step).enumerate() {
             let by1 = (by + step).min(y_end);
@@ -396,23 +392,11 @@ impl<'a> BlockMaxima<'a> {
                     *m = m.max(v);
                 }
             }
-            let row_vals = &mut vals[br * cols..(br + 1) * cols];
-            let row_pos = &mut pos[br * cols..(br + 1) * cols];
-            for (bc, (chunk, (val, p))) in colmax
-                .chunks(step)
-                .zip(row_vals.iter_mut().zip(row_pos.iter_mut()))
-                .enumerate()
+            for (val, chunk) in vals[br * cols..(br + 1) * cols]
+                .iter_mut()
+                .zip(colmax.chunks(step))
             {
                 *val = chunk.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-                if *val > 0.0 {
-                    let bx = margin + bc * step;
-                    let bx1 = (bx + step).min(x_end);
-                    *p = (by..by1)
-                        .flat_map(|y| y * w + bx..y * w + bx1)
-                        .find(|&i| data[i] == *val)
-                        .expect("the block maximum is one of its pixels")
-                        as u32;
-                }
             }
         }
         Some(Self {
@@ -424,8 +408,20 @@ impl<'a> BlockMaxima<'a> {
             y_end,
             cols,
             vals,
-            pos,
         })
+    }
+
+    /// Pixel index (`y·w + x`) of the first maximum of block `b` (positive) in row-major order.
+    fn locate(&self, b: usize) -> usize {
+        let (w, step) = (self.w, self.n + 1);
+        let bx = self.margin + (b % self.cols) * step;
+        let by = self.margin + (b / self.cols) * step;
+        let (bx1, by1) = ((bx + step).min(self.x_end), (by + step).min(self.y_end));
+        let v = self.vals[b];
+        (by..by1)
+            .flat_map(|y| y * w + bx..y * w + bx1)
+            .find(|&i| self.score[i] == v)
+            .expect("the maximum of a block is one of its pixels")
     }
 
     /// Whether the maximum of block `b` (positive) is not beaten: no pixel of its `(2n+1)²`
@@ -433,10 +429,9 @@ impl<'a> BlockMaxima<'a> {
     /// neighbouring blocks whose maximum exceeds it can hold such a pixel; when that maximum lies
     /// inside the window the answer is immediate, otherwise the block's part of the window is
     /// scanned.
-    fn survives(&self, b: usize) -> bool {
+    fn survives(&self, b: usize, p: usize) -> bool {
         let (w, n, step, m) = (self.w, self.n, self.n + 1, self.margin);
         let v = self.vals[b];
-        let p = self.pos[b] as usize;
         let (mx, my) = (p % w, p / w);
         let (x0, x1) = (mx.saturating_sub(n).max(m), (mx + n + 1).min(self.x_end));
         let (y0, y1) = (my.saturating_sub(n).max(m), (my + n + 1).min(self.y_end));
@@ -446,7 +441,7 @@ impl<'a> BlockMaxima<'a> {
                 if nb == b || self.vals[nb] <= v {
                     continue;
                 }
-                let q = self.pos[nb] as usize;
+                let q = self.locate(nb);
                 if (x0..x1).contains(&(q % w)) && (y0..y1).contains(&(q / w)) {
                     return false;
                 }
@@ -461,13 +456,14 @@ impl<'a> BlockMaxima<'a> {
         true
     }
 
-    fn candidate(&self, b: usize) -> Candidate {
-        let p = self.pos[b] as usize;
-        Candidate {
+    /// The candidate at the maximum of block `b` (positive), if it survives the suppression.
+    fn candidate(&self, b: usize) -> Option<Candidate> {
+        let p = self.locate(b);
+        self.survives(b, p).then(|| Candidate {
             x: p % self.w,
             y: p / self.w,
             score: self.vals[b],
-        }
+        })
     }
 }
 
@@ -481,8 +477,8 @@ pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Ve
         return Vec::new();
     };
     (0..blocks.vals.len())
-        .filter(|&b| blocks.vals[b] > 0.0 && blocks.survives(b))
-        .map(|b| blocks.candidate(b))
+        .filter(|&b| blocks.vals[b] > 0.0)
+        .filter_map(|b| blocks.candidate(b))
         .collect()
 }
 
@@ -569,8 +565,8 @@ fn select_from_score(score: &GrayImage, params: &PrefilterParams) -> Vec<Candida
             (None, Some(t)) if v < t || cands.len() >= cap => return false,
             _ => {}
         }
-        if blocks.survives(b) {
-            cands.push(blocks.candidate(b));
+        if let Some(c) = blocks.candidate(b) {
+            cands.push(c);
             if wanted.is_none() && cands.len() == REFERENCE_COUNT {
                 let t = rel * cands[REFERENCE_COUNT / 2].score;
                 threshold = Some(t);
@@ -905,5 +901,49 @@ mod tests {
         assert_eq!(got, reference_select(&hessian_score(&image, p.sigma), &p));
         // A 8×6 board has 7×5 inner corners; all of them must be there.
         assert!(got.len() >= 35, "{}", got.len());
+    }
+}
+#[cfg(test)]
+mod scratch_timing {
+    use super::*;
+    #[test]
+    #[ignore]
+    fn timing() {
+        let image = tests_board(1920, 1200);
+        let score = hessian_score(&image, 2.0);
+        let p = PrefilterParams::default();
+        for _ in 0..3 {
+            let t = std::time::Instant::now();
+            let b = BlockMaxima::new(&score, 3, 2).unwrap();
+            let t1 = t.elapsed();
+            let n = non_maximum_suppression(&score, 3, 2);
+            let t2 = t.elapsed();
+            let s = select_from_score(&score, &p);
+            let t3 = t.elapsed();
+            eprintln!(
+                "blocks {:?} nms {:?} ({}) select {:?} ({}) {}",
+                t1,
+                t2 - t1,
+                n.len(),
+                t3 - t2,
+                s.len(),
+                b.vals.len()
+            );
+        }
+    }
+    fn tests_board(w: usize, h: usize) -> GrayImage {
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = (
+                    (i % w) as f32 - w as f32 / 2.0,
+                    (i / w) as f32 - h as f32 / 2.0,
+                );
+                let (u, v) = ((0.8 * x + 0.6 * y) / 60.0, (-0.6 * x + 0.8 * y) / 60.0);
+                let inside = u.abs() < 5.0 && v.abs() < 5.0;
+                let dark = inside && (u.floor() as i32 + v.floor() as i32) % 2 == 0;
+                (if dark { 30.0 } else { 220.0 }) + ((i * 7919 % 17) as f32 - 8.0)
+            })
+            .collect();
+        GrayImage::from_vec(w, h, data).unwrap()
     }
 }
