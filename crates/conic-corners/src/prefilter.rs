@@ -429,27 +429,33 @@ impl<'a> BlockMaxima<'a> {
     }
 
     /// Pixel index (`y·w + x`) of the first maximum of block `b` (positive) in row-major order.
-    fn locate(&self, b: usize) -> usize {
+    fn locate(&self, b: usize) -> (usize, usize) {
         let (w, step) = (self.w, self.n + 1);
         let bx = self.margin + (b % self.cols) * step;
         let by = self.margin + (b / self.cols) * step;
         let (bx1, by1) = ((bx + step).min(self.x_end), (by + step).min(self.y_end));
         let v = self.vals[b];
         (by..by1)
-            .flat_map(|y| y * w + bx..y * w + bx1)
-            .find(|&i| self.score[i] == v)
-            .expect("the maximum of a block is one of its pixels")
+            .find_map(|y| {
+                let row = &self.score[y * w + bx..y * w + bx1];
+                row.iter().position(|&s| s == v).map(|i| (bx + i, y))
+            })
+            .unwrap_or((bx, by))
     }
 
-    /// Whether the maximum of block `b` (positive) is not beaten: no pixel of its `(2n+1)²`
-    /// neighbourhood (clipped to the margin) outside the block is strictly larger. Only
-    /// neighbouring blocks whose maximum exceeds it can hold such a pixel; when that maximum lies
-    /// inside the window the answer is immediate, otherwise the block's part of the window is
-    /// scanned.
-    fn survives(&self, b: usize, p: usize) -> bool {
+    /// Whether the maximum of block `b` (positive), at `(mx, my)`, is not beaten: no pixel of its
+    /// `(2n+1)²` neighbourhood (clipped to the margin) outside the block is strictly larger. Only
+    /// neighbouring blocks whose maximum exceeds it can hold such a pixel; when that maximum (at
+    /// `pos(block)`) lies inside the window the answer is immediate, otherwise the block's part of
+    /// the window is scanned.
+    fn survives(
+        &self,
+        b: usize,
+        (mx, my): (usize, usize),
+        pos: impl Fn(usize) -> (usize, usize),
+    ) -> bool {
         let (w, n, step, m) = (self.w, self.n, self.n + 1, self.margin);
         let v = self.vals[b];
-        let (mx, my) = (p % w, p / w);
         let (x0, x1) = (mx.saturating_sub(n).max(m), (mx + n + 1).min(self.x_end));
         let (y0, y1) = (my.saturating_sub(n).max(m), (my + n + 1).min(self.y_end));
         for br in (y0 - m) / step..=(y1 - 1 - m) / step {
@@ -458,8 +464,8 @@ impl<'a> BlockMaxima<'a> {
                 if nb == b || self.vals[nb] <= v {
                     continue;
                 }
-                let q = self.locate(nb);
-                if (x0..x1).contains(&(q % w)) && (y0..y1).contains(&(q / w)) {
+                let (qx, qy) = pos(nb);
+                if (x0..x1).contains(&qx) && (y0..y1).contains(&qy) {
                     return false;
                 }
                 let (bx, by) = (m + bc * step, m + br * step);
@@ -473,12 +479,16 @@ impl<'a> BlockMaxima<'a> {
         true
     }
 
-    /// The candidate at the maximum of block `b` (positive), if it survives the suppression.
-    fn candidate(&self, b: usize) -> Option<Candidate> {
-        let p = self.locate(b);
-        self.survives(b, p).then(|| Candidate {
-            x: p % self.w,
-            y: p / self.w,
+    /// The candidate at the maximum of block `b` (positive) at `p`, if it survives.
+    fn candidate(
+        &self,
+        b: usize,
+        p: (usize, usize),
+        pos: impl Fn(usize) -> (usize, usize),
+    ) -> Option<Candidate> {
+        self.survives(b, p, pos).then_some(Candidate {
+            x: p.0,
+            y: p.1,
             score: self.vals[b],
         })
     }
@@ -493,9 +503,21 @@ pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Ve
     let Some(blocks) = BlockMaxima::new(score, n, margin) else {
         return Vec::new();
     };
+    // Every positive block is checked here, and most are a neighbour of several: locate once.
+    let pos: Vec<(u32, u32)> = (0..blocks.vals.len())
+        .map(|b| {
+            let (x, y) = if blocks.vals[b] > 0.0 {
+                blocks.locate(b)
+            } else {
+                (0, 0)
+            };
+            (x as u32, y as u32)
+        })
+        .collect();
+    let at = |b: usize| (pos[b].0 as usize, pos[b].1 as usize);
     (0..blocks.vals.len())
         .filter(|&b| blocks.vals[b] > 0.0)
-        .filter_map(|b| blocks.candidate(b))
+        .filter_map(|b| blocks.candidate(b, at(b), at))
         .collect()
 }
 
@@ -582,7 +604,7 @@ fn select_from_score(score: &GrayImage, params: &PrefilterParams) -> Vec<Candida
             (None, Some(t)) if v < t || cands.len() >= cap => return false,
             _ => {}
         }
-        if let Some(c) = blocks.candidate(b) {
+        if let Some(c) = blocks.candidate(b, blocks.locate(b), |nb| blocks.locate(nb)) {
             cands.push(c);
             if wanted.is_none() && cands.len() == REFERENCE_COUNT {
                 let t = rel * cands[REFERENCE_COUNT / 2].score;
