@@ -17,6 +17,9 @@ const RADIUS_SIGMAS: f32 = 3.0;
 /// Rows per parallel band of [`hessian_score`]: large enough that the `2r` rows of horizontal
 /// pass each band recomputes at its top are a small overhead.
 const BAND_ROWS: usize = 64;
+/// Columns per strip of a band: the ring of `2r+1` rows of three horizontal passes over one strip
+/// (39 rows at σ = 2) stays in the L1 cache while the vertical pass reads it.
+const STRIP_COLS: usize = 256;
 /// The adaptive cut of [`prefilter`] takes its reference score as the median of this many
 /// strongest candidates, so that a few isolated peaks stronger than any corner (glints, a sharp
 /// junction in the background) cannot raise the threshold above the board.
@@ -139,12 +142,14 @@ fn horizontal_chunk<const L: usize, const FUSED: bool>(
     }
 }
 
-/// Horizontal pass of image row `y` into ring slot `slot` of `s`.
+/// Horizontal pass of image row `y`, columns `sx0..sx0 + sw` (one strip), into ring slot `slot`
+/// of `s` (whose rows are `sw` long).
 #[inline(always)]
 fn horizontal_row<const FUSED: bool>(
     image: &GrayImage,
     k: &Kernels,
     y: usize,
+    (sx0, sw): (usize, usize),
     slot: usize,
     s: &mut BandScratch,
 ) {
@@ -152,18 +157,25 @@ fn horizontal_row<const FUSED: bool>(
     let r = k.radius();
     let row = image.row(y);
     // Clamp-to-edge padding: a step edge stays a step up to the border.
-    s.padded[..r].fill(row[0]);
-    s.padded[r..r + w].copy_from_slice(row);
-    s.padded[r + w..].fill(row[w - 1]);
-    let h0 = &mut s.h0[slot * w..(slot + 1) * w];
-    let h1 = &mut s.h1[slot * w..(slot + 1) * w];
-    let h2 = &mut s.h2[slot * w..(slot + 1) * w];
-    let body = w - w % LANES;
+    let (lo, hi) = (sx0 as isize - r as isize, (sx0 + sw + r) as isize);
+    let (in_lo, in_hi) = (lo.max(0) as usize, hi.min(w as isize) as usize);
+    let (left, right) = (
+        (in_lo as isize - lo) as usize,
+        (hi - in_hi as isize) as usize,
+    );
+    let padded = &mut s.padded[..sw + 2 * r];
+    padded[..left].fill(row[0]);
+    padded[left..left + in_hi - in_lo].copy_from_slice(&row[in_lo..in_hi]);
+    padded[sw + 2 * r - right..].fill(row[w - 1]);
+    let h0 = &mut s.h0[slot * sw..(slot + 1) * sw];
+    let h1 = &mut s.h1[slot * sw..(slot + 1) * sw];
+    let h2 = &mut s.h2[slot * sw..(slot + 1) * sw];
+    let body = sw - sw % LANES;
     for x0 in (0..body).step_by(LANES) {
-        horizontal_chunk::<LANES, FUSED>(k, &s.padded, x0, h0, h1, h2);
+        horizontal_chunk::<LANES, FUSED>(k, padded, x0, h0, h1, h2);
     }
-    for x0 in body..w {
-        horizontal_chunk::<1, FUSED>(k, &s.padded, x0, h0, h1, h2);
+    for x0 in body..sw {
+        horizontal_chunk::<1, FUSED>(k, padded, x0, h0, h1, h2);
     }
 }
 
@@ -235,33 +247,38 @@ fn score_band_generic<const FUSED: bool>(
     let (w, h) = (image.width(), image.height());
     let r = k.radius();
     let ring = 2 * r + 1;
+    let strip = STRIP_COLS.min(w);
     let mut s = BandScratch {
-        padded: vec![0.0; w + 2 * r],
-        h0: vec![0.0; ring * w],
-        h1: vec![0.0; ring * w],
-        h2: vec![0.0; ring * w],
+        padded: vec![0.0; strip + 2 * r],
+        h0: vec![0.0; ring * strip],
+        h1: vec![0.0; ring * strip],
+        h2: vec![0.0; ring * strip],
     };
     // Logical row j (may lie outside the image: clamped) lives in ring slot j mod (2r+1).
     let slot = |j: isize| (j.rem_euclid(ring as isize)) as usize;
     let clamp_row = |j: isize| j.clamp(0, h as isize - 1) as usize;
     let first = y0 as isize - r as isize;
-    for j in first..first + 2 * r as isize {
-        horizontal_row::<FUSED>(image, k, clamp_row(j), slot(j), &mut s);
-    }
     let mut slots = vec![0usize; ring];
-    let body = w - w % LANES;
-    for (i, out_row) in out.chunks_exact_mut(w).enumerate() {
-        let y = (y0 + i) as isize;
-        let newest = y + r as isize;
-        horizontal_row::<FUSED>(image, k, clamp_row(newest), slot(newest), &mut s);
-        for (d, sl) in slots.iter_mut().enumerate() {
-            *sl = slot(y - r as isize + d as isize);
+    for sx0 in (0..w).step_by(strip) {
+        let sw = strip.min(w - sx0);
+        for j in first..first + 2 * r as isize {
+            horizontal_row::<FUSED>(image, k, clamp_row(j), (sx0, sw), slot(j), &mut s);
         }
-        for x0 in (0..body).step_by(LANES) {
-            vertical_chunk::<LANES, FUSED>(k, &s, w, &slots, x0, out_row);
-        }
-        for x0 in body..w {
-            vertical_chunk::<1, FUSED>(k, &s, w, &slots, x0, out_row);
+        let body = sw - sw % LANES;
+        for (i, out_row) in out.chunks_exact_mut(w).enumerate() {
+            let y = (y0 + i) as isize;
+            let newest = y + r as isize;
+            horizontal_row::<FUSED>(image, k, clamp_row(newest), (sx0, sw), slot(newest), &mut s);
+            for (d, sl) in slots.iter_mut().enumerate() {
+                *sl = slot(y - r as isize + d as isize);
+            }
+            let out_strip = &mut out_row[sx0..sx0 + sw];
+            for x0 in (0..body).step_by(LANES) {
+                vertical_chunk::<LANES, FUSED>(k, &s, sw, &slots, x0, out_strip);
+            }
+            for x0 in body..sw {
+                vertical_chunk::<1, FUSED>(k, &s, sw, &slots, x0, out_strip);
+            }
         }
     }
 }
@@ -349,57 +366,202 @@ impl Default for PrefilterParams {
     }
 }
 
-/// Positive local maxima of `score` by block non-maximum suppression (Neubeck & Van Gool): the
-/// image is tiled in `(n+1)²` blocks, the maximum of each block is found, then accepted if no pixel
-/// of its `(2n+1)²` neighbourhood outside the block is strictly larger. Ties are kept
-/// ("conservative"), so a plateau can yield several candidates. Pixels within `margin` of the
-/// border are ignored.
-pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Vec<Candidate> {
-    let (w, h) = (score.width(), score.height());
-    let mut out = Vec::new();
-    if w <= 2 * margin || h <= 2 * margin {
-        return out;
-    }
-    let (x_end, y_end) = (w - margin, h - margin);
-    let step = n + 1;
-    let data = score.data();
-    for by in (margin..y_end).step_by(step) {
-        for bx in (margin..x_end).step_by(step) {
-            let (bx1, by1) = ((bx + step).min(x_end), (by + step).min(y_end));
-            let (mut mx, mut my, mut mv) = (bx, by, f32::NEG_INFINITY);
-            for y in by..by1 {
-                for (x, &v) in data[y * w + bx..y * w + bx1].iter().enumerate() {
-                    if v > mv {
-                        (mx, my, mv) = (bx + x, y, v);
-                    }
-                }
-            }
-            if mv.is_nan() || mv <= 0.0 {
-                continue;
-            }
-            let (x0, x1) = (mx.saturating_sub(n).max(margin), (mx + n + 1).min(x_end));
-            let (y0, y1) = (my.saturating_sub(n).max(margin), (my + n + 1).min(y_end));
-            let beaten = (y0..y1).any(|y| {
-                let in_block_row = (by..by1).contains(&y);
-                data[y * w + x0..y * w + x1]
-                    .iter()
-                    .enumerate()
-                    .any(|(i, &v)| v > mv && !(in_block_row && (bx..bx1).contains(&(x0 + i))))
-            });
-            if !beaten {
-                out.push(Candidate {
-                    x: mx,
-                    y: my,
-                    score: mv,
-                });
-            }
-        }
-    }
-    out
+/// The maximum of every `(n+1)²` block of the score inside the border margin, the tiling of
+/// [`non_maximum_suppression`]: a candidate can only be a block maximum, so the suppression and
+/// the selection of [`prefilter`] look at these (one per `(n+1)²` pixels) instead of every pixel.
+struct BlockMaxima<'a> {
+    score: &'a [f32],
+    /// Image width (row stride of `score`).
+    w: usize,
+    n: usize,
+    margin: usize,
+    x_end: usize,
+    y_end: usize,
+    /// Blocks per row.
+    cols: usize,
+    /// Maximum of each block, row-major over the blocks; `−∞` when the block holds only NaN.
+    vals: Vec<f32>,
 }
 
-/// Corner candidates of `image`, strongest first: [`hessian_score`] at `params.sigma`, then
-/// [`non_maximum_suppression`], then the cut.
+impl<'a> BlockMaxima<'a> {
+    /// `None` when the image is too small for the margin (or too large to index with `u32`).
+    fn new(score: &'a GrayImage, n: usize, margin: usize) -> Option<Self> {
+        let (w, h) = (score.width(), score.height());
+        if w <= 2 * margin || h <= 2 * margin || w.checked_mul(h)? > u32::MAX as usize {
+            return None;
+        }
+        let (x_end, y_end) = (w - margin, h - margin);
+        let step = n + 1;
+        let (cols, rows) = (
+            (x_end - margin).div_ceil(step),
+            (y_end - margin).div_ceil(step),
+        );
+        let data = score.data();
+        let mut vals = vec![f32::NEG_INFINITY; cols * rows];
+        // Column maxima of one block row first (a vectorizable element-wise max, NaN ignored as
+        // by `>`), then the block maxima from them; positions are found only when needed.
+        let mut colmax = vec![f32::NEG_INFINITY; x_end - margin];
+        for (br, by) in (margin..y_end).step_by(step).enumerate() {
+            let by1 = (by + step).min(y_end);
+            colmax.fill(f32::NEG_INFINITY);
+            for y in by..by1 {
+                for (m, &v) in colmax.iter_mut().zip(&data[y * w + margin..y * w + x_end]) {
+                    *m = m.max(v);
+                }
+            }
+            for (val, chunk) in vals[br * cols..(br + 1) * cols]
+                .iter_mut()
+                .zip(colmax.chunks(step))
+            {
+                *val = chunk.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+            }
+        }
+        Some(Self {
+            score: data,
+            w,
+            n,
+            margin,
+            x_end,
+            y_end,
+            cols,
+            vals,
+        })
+    }
+
+    /// Pixel index (`y·w + x`) of the first maximum of block `b` (positive) in row-major order.
+    fn locate(&self, b: usize) -> (usize, usize) {
+        let (w, step) = (self.w, self.n + 1);
+        let bx = self.margin + (b % self.cols) * step;
+        let by = self.margin + (b / self.cols) * step;
+        let (bx1, by1) = ((bx + step).min(self.x_end), (by + step).min(self.y_end));
+        let v = self.vals[b];
+        (by..by1)
+            .find_map(|y| {
+                let row = &self.score[y * w + bx..y * w + bx1];
+                row.iter().position(|&s| s == v).map(|i| (bx + i, y))
+            })
+            .unwrap_or((bx, by))
+    }
+
+    /// Whether the maximum of block `b` (positive), at `(mx, my)`, is not beaten: no pixel of its
+    /// `(2n+1)²` neighbourhood (clipped to the margin) outside the block is strictly larger. Only
+    /// neighbouring blocks whose maximum exceeds it can hold such a pixel; when that maximum (at
+    /// `pos(block)`) lies inside the window the answer is immediate, otherwise the block's part of
+    /// the window is scanned.
+    fn survives(
+        &self,
+        b: usize,
+        (mx, my): (usize, usize),
+        pos: impl Fn(usize) -> (usize, usize),
+    ) -> bool {
+        let (w, n, step, m) = (self.w, self.n, self.n + 1, self.margin);
+        let v = self.vals[b];
+        let (x0, x1) = (mx.saturating_sub(n).max(m), (mx + n + 1).min(self.x_end));
+        let (y0, y1) = (my.saturating_sub(n).max(m), (my + n + 1).min(self.y_end));
+        for br in (y0 - m) / step..=(y1 - 1 - m) / step {
+            for bc in (x0 - m) / step..=(x1 - 1 - m) / step {
+                let nb = br * self.cols + bc;
+                if nb == b || self.vals[nb] <= v {
+                    continue;
+                }
+                let (qx, qy) = pos(nb);
+                if (x0..x1).contains(&qx) && (y0..y1).contains(&qy) {
+                    return false;
+                }
+                let (bx, by) = (m + bc * step, m + br * step);
+                let (cx0, cx1) = (bx.max(x0), (bx + step).min(x1));
+                let (cy0, cy1) = (by.max(y0), (by + step).min(y1));
+                if (cy0..cy1).any(|y| self.score[y * w + cx0..y * w + cx1].iter().any(|&s| s > v)) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// The candidate at the maximum of block `b` (positive) at `p`, if it survives.
+    fn candidate(
+        &self,
+        b: usize,
+        p: (usize, usize),
+        pos: impl Fn(usize) -> (usize, usize),
+    ) -> Option<Candidate> {
+        self.survives(b, p, pos).then_some(Candidate {
+            x: p.0,
+            y: p.1,
+            score: self.vals[b],
+        })
+    }
+}
+
+/// Positive local maxima of `score` by block non-maximum suppression (Neubeck & Van Gool): the
+/// image is tiled in `(n+1)²` blocks, the maximum of each block is found (the first in row-major
+/// order on a tie), then accepted if no pixel of its `(2n+1)²` neighbourhood outside the block is
+/// strictly larger. Ties are kept ("conservative"), so a plateau can yield several candidates.
+/// Pixels within `margin` of the border are ignored. Candidates come in row-major block order.
+pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Vec<Candidate> {
+    let Some(blocks) = BlockMaxima::new(score, n, margin) else {
+        return Vec::new();
+    };
+    // Every positive block is checked here, and most are a neighbour of several: locate once.
+    let pos: Vec<(u32, u32)> = (0..blocks.vals.len())
+        .map(|b| {
+            let (x, y) = if blocks.vals[b] > 0.0 {
+                blocks.locate(b)
+            } else {
+                (0, 0)
+            };
+            (x as u32, y as u32)
+        })
+        .collect();
+    let at = |b: usize| (pos[b].0 as usize, pos[b].1 as usize);
+    (0..blocks.vals.len())
+        .filter(|&b| blocks.vals[b] > 0.0)
+        .filter_map(|b| blocks.candidate(b, at(b), at))
+        .collect()
+}
+
+/// Visits the positive block maxima in decreasing score order (ties: row-major block order) until
+/// `visit` returns `false`, sorting lazily: the next few strongest are selected and sorted in
+/// geometrically growing rounds, so stopping after the first hundreds costs a linear selection
+/// rather than a full sort. `floor` (updated by `visit`) lets later rounds drop weaker blocks
+/// before selecting.
+fn visit_descending(
+    vals: &[f32],
+    first_round: usize,
+    mut visit: impl FnMut(usize, &mut f32) -> bool,
+) {
+    let mut order: Vec<u32> = (0..vals.len() as u32)
+        .filter(|&b| vals[b as usize] > 0.0)
+        .collect();
+    let cmp = |a: &u32, b: &u32| {
+        vals[*b as usize]
+            .total_cmp(&vals[*a as usize])
+            .then(a.cmp(b))
+    };
+    let mut floor = 0.0f32;
+    let mut round = first_round.max(1);
+    while !order.is_empty() {
+        if floor > 0.0 {
+            order.retain(|&b| vals[b as usize] >= floor);
+        }
+        let take = round.min(order.len());
+        if take < order.len() {
+            order.select_nth_unstable_by(take - 1, cmp);
+        }
+        order[..take].sort_unstable_by(cmp);
+        for &b in &order[..take] {
+            if !visit(b as usize, &mut floor) {
+                return;
+            }
+        }
+        order.drain(..take);
+        round = round.saturating_mul(4);
+    }
+}
+
+/// Corner candidates of `image`, strongest first (equal scores in row-major block order):
+/// [`hessian_score`] at `params.sigma`, then [`non_maximum_suppression`], then the cut.
 ///
 /// The cut keeps the `2N` strongest when `params.expected_corners = Some(N)` (paper III-A).
 /// Otherwise it is adaptive, so that the user need not know `N`: with `S_ref` the median score of
@@ -407,25 +569,61 @@ pub fn non_maximum_suppression(score: &GrayImage, n: usize, margin: usize) -> Ve
 /// texture give many weak saddles and straight edges give none, so on a board image this keeps
 /// all corners and a few hundred distractors at most, which the template election rejects.
 /// At most `params.max_candidates` are returned. An image too small for the margin gives none.
+///
+/// The result is that of sorting the whole suppression output, but only the block maxima that
+/// can make the cut are checked: they are visited strongest first, and the visit stops once the
+/// count is reached or the scores fall below the adaptive threshold.
 pub fn prefilter(image: &GrayImage, params: &PrefilterParams) -> Vec<Candidate> {
-    let score = hessian_score(image, params.sigma);
-    let mut cands = non_maximum_suppression(&score, params.nms_radius, params.nms_tau);
-    cands.sort_unstable_by(|a, b| b.score.total_cmp(&a.score));
-    let keep = match params.expected_corners {
-        Some(n) => n.saturating_mul(2),
+    select_from_score(&hessian_score(image, params.sigma), params)
+}
+
+/// The suppression and cut of [`prefilter`] applied to a score image.
+fn select_from_score(score: &GrayImage, params: &PrefilterParams) -> Vec<Candidate> {
+    let Some(blocks) = BlockMaxima::new(score, params.nms_radius, params.nms_tau) else {
+        return Vec::new();
+    };
+    let rel = if params.min_score_rel.is_finite() {
+        params.min_score_rel.max(0.0)
+    } else {
+        0.0
+    };
+    let cap = params.max_candidates;
+    let wanted = params
+        .expected_corners
+        .map(|n| n.saturating_mul(2).min(cap));
+    let mut cands: Vec<Candidate> = Vec::new();
+    // Adaptive threshold, known once the reference candidates are found.
+    let mut threshold: Option<f32> = None;
+    let first_round = 4 * wanted
+        .unwrap_or(REFERENCE_COUNT)
+        .clamp(REFERENCE_COUNT, 4096);
+    visit_descending(&blocks.vals, first_round, |b, floor| {
+        let v = blocks.vals[b];
+        match (wanted, threshold) {
+            (Some(k), _) if cands.len() >= k => return false,
+            (None, Some(t)) if v < t || cands.len() >= cap => return false,
+            _ => {}
+        }
+        if let Some(c) = blocks.candidate(b, blocks.locate(b), |nb| blocks.locate(nb)) {
+            cands.push(c);
+            if wanted.is_none() && cands.len() == REFERENCE_COUNT {
+                let t = rel * cands[REFERENCE_COUNT / 2].score;
+                threshold = Some(t);
+                *floor = t;
+            }
+        }
+        true
+    });
+    let keep = match wanted {
+        Some(k) => k,
         None => {
             let refs = &cands[..cands.len().min(REFERENCE_COUNT)];
             let reference = refs.get(refs.len() / 2).map_or(0.0, |c| c.score);
-            let rel = if params.min_score_rel.is_finite() {
-                params.min_score_rel.max(0.0)
-            } else {
-                0.0
-            };
-            let threshold = rel * reference;
-            cands.partition_point(|c| c.score >= threshold)
+            let t = threshold.unwrap_or(rel * reference);
+            cands.partition_point(|c| c.score >= t)
         }
     };
-    cands.truncate(keep.min(params.max_candidates));
+    cands.truncate(keep.min(cap));
     cands
 }
 
@@ -515,6 +713,47 @@ mod tests {
     }
 
     #[test]
+    fn strips_match_a_direct_separable_correlation() {
+        // Wider than two strips, the last one narrower than the kernel radius.
+        let (w, h) = (2 * STRIP_COLS + 3, 23);
+        let data: Vec<f32> = (0..w * h).map(|i| ((i * 7919) % 251) as f32).collect();
+        let img = GrayImage::from_vec(w, h, data.clone()).unwrap();
+        for sigma in [1.0f32, 3.0] {
+            let k = Kernels::new(sigma);
+            let s = hessian_score(&img, sigma);
+            // Horizontal passes, then vertical passes on their columns, all with clamping.
+            let pass = |src: &[f32], kern: &[f32], odd: bool| -> Vec<f32> {
+                (0..w * h)
+                    .map(|i| apply(&src[i / w * w..(i / w + 1) * w], kern, odd, i % w))
+                    .collect()
+            };
+            let vert = |src: &[f32], kern: &[f32], odd: bool, x: usize, y: usize| -> f32 {
+                let col: Vec<f32> = (0..h).map(|yy| src[yy * w + x]).collect();
+                apply(&col, kern, odd, y)
+            };
+            let (hg, hd1, hd2) = (
+                pass(&data, &k.g, false),
+                pass(&data, &k.d1, true),
+                pass(&data, &k.d2, false),
+            );
+            for y in [0, 5, h - 1] {
+                for x in [0, 1, STRIP_COLS - 1, STRIP_COLS, 2 * STRIP_COLS + 1, w - 1] {
+                    let gxx = vert(&hd2, &k.g, false, x, y);
+                    let gyy = vert(&hg, &k.d2, false, x, y);
+                    let gxy = vert(&hd1, &k.d1, true, x, y);
+                    let want = gxy * gxy - gxx * gyy;
+                    let scale = gxx.abs().max(gyy.abs()).max(gxy.abs()).powi(2).max(1.0);
+                    assert!(
+                        (s.get(x, y) - want).abs() < 1e-4 * scale,
+                        "{x} {y} {} {want}",
+                        s.get(x, y)
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
     fn tiny_and_degenerate_inputs_do_not_panic() {
         let one = GrayImage::filled(1, 1, 3.0).unwrap();
         assert!(hessian_score(&one, 2.0).get(0, 0).abs() < 1e-9);
@@ -556,5 +795,191 @@ mod tests {
         got.sort_unstable();
         // (7, 6) is within 3 px of the stronger (5, 5); (1, 15) is inside the margin.
         assert_eq!(got, vec![(5, 5), (15, 25), (20, 8)]);
+    }
+
+    /// The block suppression pixel by pixel, as first written: the reference for the fast path.
+    fn reference_nms(score: &GrayImage, n: usize, margin: usize) -> Vec<Candidate> {
+        let (w, h) = (score.width(), score.height());
+        let mut out = Vec::new();
+        if w <= 2 * margin || h <= 2 * margin {
+            return out;
+        }
+        let (x_end, y_end) = (w - margin, h - margin);
+        let step = n + 1;
+        for by in (margin..y_end).step_by(step) {
+            for bx in (margin..x_end).step_by(step) {
+                let (bx1, by1) = ((bx + step).min(x_end), (by + step).min(y_end));
+                let (mut mx, mut my, mut mv) = (bx, by, f32::NEG_INFINITY);
+                for y in by..by1 {
+                    for x in bx..bx1 {
+                        if score.get(x, y) > mv {
+                            (mx, my, mv) = (x, y, score.get(x, y));
+                        }
+                    }
+                }
+                if mv.is_nan() || mv <= 0.0 {
+                    continue;
+                }
+                let in_block =
+                    |x: usize, y: usize| (bx..bx1).contains(&x) && (by..by1).contains(&y);
+                let beaten = (my.saturating_sub(n).max(margin)..(my + n + 1).min(y_end)).any(|y| {
+                    (mx.saturating_sub(n).max(margin)..(mx + n + 1).min(x_end))
+                        .any(|x| score.get(x, y) > mv && !in_block(x, y))
+                });
+                if !beaten {
+                    out.push(Candidate {
+                        x: mx,
+                        y: my,
+                        score: mv,
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// [`prefilter`]'s selection done the obvious way: suppress everywhere, stable sort, cut.
+    fn reference_select(score: &GrayImage, p: &PrefilterParams) -> Vec<Candidate> {
+        let mut cands = reference_nms(score, p.nms_radius, p.nms_tau);
+        cands.sort_by(|a, b| b.score.total_cmp(&a.score));
+        let keep = match p.expected_corners {
+            Some(n) => n.saturating_mul(2),
+            None => {
+                let refs = &cands[..cands.len().min(REFERENCE_COUNT)];
+                let reference = refs.get(refs.len() / 2).map_or(0.0, |c| c.score);
+                let rel = if p.min_score_rel.is_finite() {
+                    p.min_score_rel.max(0.0)
+                } else {
+                    0.0
+                };
+                cands.partition_point(|c| c.score >= rel * reference)
+            }
+        };
+        cands.truncate(keep.min(p.max_candidates));
+        cands
+    }
+
+    /// A rotated checkerboard with noise: the score image of a real-like scene.
+    fn board_like(w: usize, h: usize, seed: u64) -> GrayImage {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let (angle, square) = (rng.gen_range(0.0..1.5f32), rng.gen_range(9.0..20.0f32));
+        let (c, s) = (angle.cos(), angle.sin());
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = (
+                    (i % w) as f32 - w as f32 / 2.0,
+                    (i / w) as f32 - h as f32 / 2.0,
+                );
+                let (u, v) = ((c * x + s * y) / square, (-s * x + c * y) / square);
+                let inside = u.abs() < 4.0 && v.abs() < 3.0;
+                let dark = inside && (u.floor() as i32 + v.floor() as i32) % 2 == 0;
+                (if dark { 30.0 } else { 220.0 }) + rng.gen_range(-8.0..8.0)
+            })
+            .collect();
+        GrayImage::from_vec(w, h, data).unwrap()
+    }
+
+    /// Selection from a score image through the fast path (the part of [`prefilter`] after the
+    /// Hessian), for comparison with [`reference_select`].
+    fn fast_select(score: &GrayImage, p: &PrefilterParams) -> Vec<Candidate> {
+        select_from_score(score, p)
+    }
+
+    fn all_params() -> Vec<PrefilterParams> {
+        let d = PrefilterParams::default();
+        let mut v = vec![d];
+        for n in [1, 2, 3, 5] {
+            for tau in [0, 2, 7] {
+                v.push(PrefilterParams {
+                    nms_radius: n,
+                    nms_tau: tau,
+                    ..d
+                });
+            }
+        }
+        for rel in [0.0, 0.01, 0.3, 1.0, 2.0, f32::NAN] {
+            v.push(PrefilterParams {
+                min_score_rel: rel,
+                ..d
+            });
+        }
+        for cap in [0, 1, 5, 15, 16, 17, 40] {
+            v.push(PrefilterParams {
+                max_candidates: cap,
+                ..d
+            });
+            v.push(PrefilterParams {
+                max_candidates: cap,
+                min_score_rel: 0.0,
+                ..d
+            });
+        }
+        for n in [0, 1, 7, 40, 100_000, usize::MAX] {
+            v.push(PrefilterParams {
+                expected_corners: Some(n),
+                ..d
+            });
+        }
+        v
+    }
+
+    #[test]
+    fn fast_nms_and_selection_match_the_reference_on_board_like_scores() {
+        for seed in 0..4 {
+            let score = hessian_score(&board_like(173, 131, seed), 2.0);
+            for p in all_params() {
+                let (n, tau) = (p.nms_radius, p.nms_tau);
+                assert_eq!(
+                    non_maximum_suppression(&score, n, tau),
+                    reference_nms(&score, n, tau)
+                );
+                assert_eq!(
+                    fast_select(&score, &p),
+                    reference_select(&score, &p),
+                    "{p:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn fast_nms_and_selection_match_the_reference_with_ties_and_nan() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for _ in 0..40 {
+            let (w, h) = (rng.gen_range(1..60), rng.gen_range(1..60));
+            // Few distinct levels: plateaus and tied maxima everywhere; some NaN and negatives.
+            let data = (0..w * h)
+                .map(|_| match rng.gen_range(0..20) {
+                    0 => f32::NAN,
+                    1 => f32::INFINITY,
+                    k => (k as f32 - 6.0).max(-1.0) * 0.5,
+                })
+                .collect();
+            let score = GrayImage::from_vec(w, h, data).unwrap();
+            for p in all_params() {
+                let (n, tau) = (p.nms_radius, p.nms_tau);
+                assert_eq!(
+                    non_maximum_suppression(&score, n, tau),
+                    reference_nms(&score, n, tau)
+                );
+                assert_eq!(
+                    fast_select(&score, &p),
+                    reference_select(&score, &p),
+                    "{p:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn prefilter_is_the_selection_of_the_hessian_score() {
+        let image = board_like(200, 150, 11);
+        let p = PrefilterParams::default();
+        let got = prefilter(&image, &p);
+        assert_eq!(got, reference_select(&hessian_score(&image, p.sigma), &p));
+        // A 8×6 board has 7×5 inner corners; all of them must be there.
+        assert!(got.len() >= 35, "{}", got.len());
     }
 }
