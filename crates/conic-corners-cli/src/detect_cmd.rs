@@ -59,7 +59,7 @@ impl DetectArgs {
             ));
         }
         params.labels.min_corners = self.min_board_corners;
-        params.refine = self.refine.to_params()?;
+        params.refine = self.refine.to_params(params.refine.clone())?;
         params.mode = if self.mode == "board" {
             RefineMode::Board
         } else {

@@ -55,24 +55,27 @@ struct RefineArgs {
 /// The refiner's tuning knobs, shared by every command that refines.
 #[derive(Args, Clone)]
 pub struct RefineOptions {
-    /// Farthest distance (px) an edge walk goes from the corner.
-    #[arg(long, default_value_t = RefineParams::default().reach)]
-    reach: f64,
-    /// Scanlines between consecutive edge samples.
-    #[arg(long, default_value_t = RefineParams::default().stride)]
-    stride: usize,
+    /// Farthest distance (px) an edge walk goes from the corner [refine: 100; detect: 100, and
+    /// never beyond the corner's farthest grid neighbour].
+    #[arg(long)]
+    reach: Option<f64>,
+    /// Scanlines between consecutive edge samples [refine: 1; detect: 2, set 1 for the last
+    /// thousandths of a pixel at about 1.6× the refinement time].
+    #[arg(long)]
+    stride: Option<usize>,
     /// Gaussian blur σ of the image in px, if known (estimated otherwise).
     #[arg(long)]
     blur: Option<f64>,
 }
 
 impl RefineOptions {
-    fn to_params(&self) -> Result<RefineParams, String> {
+    /// `defaults` with the options given on the command line applied, validated.
+    fn to_params(&self, defaults: RefineParams) -> Result<RefineParams, String> {
         let params = RefineParams {
-            reach: self.reach,
-            stride: self.stride,
-            blur: self.blur,
-            ..RefineParams::default()
+            reach: self.reach.unwrap_or(defaults.reach),
+            stride: self.stride.unwrap_or(defaults.stride),
+            blur: self.blur.or(defaults.blur),
+            ..defaults
         };
         params.validate()?;
         Ok(params)
@@ -127,7 +130,7 @@ fn read_points(path: &Path) -> Result<Vec<[f64; 2]>, String> {
 }
 
 fn run_refine(args: &RefineArgs) -> Result<(), String> {
-    let params = args.params.to_params()?;
+    let params = args.params.to_params(RefineParams::default())?;
     let mut points = args.at.clone();
     if let Some(file) = &args.points {
         points.extend(read_points(file)?);

@@ -196,13 +196,13 @@ fn int_at_least(name: &str, value: Option<i64>, min: i64) -> PyResult<Option<usi
     }
 }
 
-/// Refinement parameters from the keywords, defaults for the ones not given, validated.
+/// Refinement parameters from the keywords, `defaults` for the ones not given, validated.
 fn refine_params(
+    defaults: RefineParams,
     reach: Option<f64>,
     stride: Option<i64>,
     blur: Option<f64>,
 ) -> PyResult<RefineParams> {
-    let defaults = RefineParams::default();
     let params = RefineParams {
         reach: reach.unwrap_or(defaults.reach),
         stride: int_at_least("stride", stride, 1)?.unwrap_or(defaults.stride),
@@ -245,7 +245,7 @@ fn detect<'py>(
     if let Some(m) = int_at_least("min_board_corners", min_board_corners, 4)? {
         params.labels.min_corners = m;
     }
-    params.refine = refine_params(reach, stride, blur)?;
+    params.refine = refine_params(params.refine.clone(), reach, stride, blur)?;
     params.validate().map_err(PyValueError::new_err)?;
     let gray = gray_from_numpy(image, bgr)?;
     let detection = py.detach(|| detect_rs(&gray, &params));
@@ -298,7 +298,7 @@ fn refine<'py>(
     blur: Option<f64>,
     bgr: bool,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    let params = refine_params(reach, stride, blur)?;
+    let params = refine_params(RefineParams::default(), reach, stride, blur)?;
     let arr = points.cast::<PyUntypedArray>().map_err(|_| {
         PyTypeError::new_err(format!(
             "points must be a numpy.ndarray, got {}",

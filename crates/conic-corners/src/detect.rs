@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// Parameters of [`detect`]: one block per stage. `Default` is what the CLI uses.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct DetectParams {
     /// Pre-filter (III-A). Its `expected_corners` is the optional N of the paper.
     pub prefilter: PrefilterParams,
@@ -41,6 +41,27 @@ pub enum RefineMode {
     /// Each corner as the intersection of its row and column curves fitted along the whole board
     /// ([`crate::board_fit`]), the local answer where a line has too few samples.
     Board,
+}
+
+impl Default for DetectParams {
+    /// Every stage's defaults, except that corners are refined from every second scanline
+    /// (`refine.stride = 2`): on a board the walks are bounded by the neighbours anyway, and this
+    /// halves the refinement time for about 0.002 px more error (median 0.006 instead of
+    /// 0.004 px on the speed benchmark's board).
+    fn default() -> Self {
+        Self {
+            prefilter: PrefilterParams::default(),
+            election: ElectionParams::default(),
+            connectivity: ConnectivityParams::default(),
+            labels: LabelParams::default(),
+            refine: RefineParams {
+                stride: 2,
+                ..RefineParams::default()
+            },
+            mode: RefineMode::default(),
+            board_fit: BoardFitParams::default(),
+        }
+    }
 }
 
 impl DetectParams {

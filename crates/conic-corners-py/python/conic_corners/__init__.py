@@ -129,7 +129,8 @@ def detect(
             on a board it also stops at the next corner).
         blur: Gaussian blur σ (px) of the image if known, 0..=20; estimated when ``None``.
         min_board_corners: smallest board kept, ≥ 4 (default 4).
-        stride: scanlines between consecutive edge samples, 1..=64 (default 1).
+        stride: scanlines between consecutive edge samples, 1..=64 (default 2 here, as in the
+            CLI's ``detect``; 1 gains the last thousandths of a pixel at ~1.6× the time).
         bgr: colour images are in OpenCV's B, G, R order.
 
     Returns:
