@@ -13,7 +13,7 @@
 //! 1. **Sampling** (III-D): along each row line (corners of one row by column) and each column
 //!    line, every edge segment between two consecutive corners is walked from one corner to the
 //!    next, one sigmoid fit per pixel scanline
-//!    ([`sample_edge_with`](crate::edge_sampling::sample_edge_with)), skipping the blurred zone
+//!    ([`sample_edge_with`]), skipping the blurred zone
 //!    (`2.5σ + 3` px) around each corner and any scanline whose profile window would reach the
 //!    crossing edge. The walk starts along the line's tangent at the corner (quadratic through
 //!    three corners) and then predicts each crossing from a line through the last samples. Beyond
