@@ -25,15 +25,7 @@ import sys
 from collections import defaultdict
 
 OURS_PRIMARY = "conic-corners"
-PEER_ORDER = (
-    "opencv-gftt25+csp",
-    "opencv-gftt100+csp",
-    "opencv-csp-w5",
-    "opencv-csp-w11",
-    "libcbdetect",
-    "chess-corners-r2",
-    "chess-corners-r5",
-)
+from peers import METHODS as PEER_ORDER  # noqa: E402  (bench/ is on sys.path: run as a script)
 PROTOCOL_ORDER = ("noise", "blur", "perspective", "curvature")
 SUCCESS_PX = 1.0
 

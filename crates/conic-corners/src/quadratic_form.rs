@@ -339,8 +339,9 @@ impl Frame {
     }
 }
 
-/// Two passes (centroid, then centred scatter) so that large coordinates do not cancel.
-fn principal_frame(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Frame> {
+/// Sum of the positive weights, the weighted centroid and the number of points with a positive
+/// weight (the centroid is NaN when that number is 0).
+fn weighted_centroid(points: &[[f64; 2]], weights: Option<&[f64]>) -> (f64, [f64; 2], usize) {
     let (mut sw, mut sx, mut sy, mut count) = (0.0, 0.0, 0.0, 0usize);
     for (i, p) in points.iter().enumerate() {
         let w = weight(weights, i);
@@ -351,10 +352,15 @@ fn principal_frame(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Frame
             count += 1;
         }
     }
+    (sw, [sx / sw, sy / sw], count)
+}
+
+/// Two passes (centroid, then centred scatter) so that large coordinates do not cancel.
+fn principal_frame(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Frame> {
+    let (sw, [cx, cy], count) = weighted_centroid(points, weights);
     if count < 2 || !(sw > 0.0) {
         return None;
     }
-    let (cx, cy) = (sx / sw, sy / sw);
     let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
     for (i, p) in points.iter().enumerate() {
         let w = weight(weights, i);
@@ -421,20 +427,10 @@ pub fn fit_ellipse_direct(points: &[[f64; 2]], weights: Option<&[f64]>) -> Optio
     if !valid_input(points, weights) {
         return None;
     }
-    let (mut sw, mut sx, mut sy, mut count) = (0.0, 0.0, 0.0, 0usize);
-    for (i, p) in points.iter().enumerate() {
-        let w = weight(weights, i);
-        if w > 0.0 {
-            sw += w;
-            sx += w * p[0];
-            sy += w * p[1];
-            count += 1;
-        }
-    }
+    let (sw, c, count) = weighted_centroid(points, weights);
     if count < 5 {
         return None;
     }
-    let c = [sx / sw, sy / sw];
     let mut sd = 0.0;
     for (i, p) in points.iter().enumerate() {
         sd += weight(weights, i) * (p[0] - c[0]).hypot(p[1] - c[1]);
