@@ -1,8 +1,9 @@
 //! `conic-corners detect`: boards in images, one JSON object (or CSV rows) per image.
 
-use crate::draw::draw_detection;
+use crate::draw::{draw_board_fits, draw_detection};
 use crate::RefineOptions;
 use clap::Args;
+use conic_corners::board_fit::fit_board_with_curves;
 use conic_corners::detect::{detect, DetectParams, Detection, RefineMode};
 use conic_corners::GrayImage;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -26,7 +27,8 @@ pub struct DetectArgs {
     /// Smallest board (corners) reported.
     #[arg(long, default_value_t = DetectParams::default().labels.min_corners)]
     min_board_corners: usize,
-    /// Write the image with corners, grid edges and labels drawn on it (one input image only).
+    /// Write the image with corners, grid edges and labels drawn on it (one input image only); with
+    /// `--refine board` also the edge samples and the fitted curves.
     #[arg(long, value_name = "OUT.png", conflicts_with = "draw_dir")]
     draw: Option<PathBuf>,
     /// Write one overlay per input image into DIR (named after the input, as PNG).
@@ -140,7 +142,17 @@ fn process(args: &DetectArgs, params: &DetectParams, path: &Path) -> Result<Stri
     let image = GrayImage::open(path).map_err(|e| e.to_string())?;
     let det = detect(&image, params);
     if let Some(out) = overlay_path(args, path) {
-        draw_detection(&image, &det)
+        let mut picture = draw_detection(&image, &det);
+        if params.mode == RefineMode::Board {
+            // The curves are recomputed for the picture only; `detect` keeps just the corners.
+            let fits: Vec<_> = det
+                .boards
+                .iter()
+                .map(|b| fit_board_with_curves(&image, b, &params.board_fit))
+                .collect();
+            draw_board_fits(&mut picture, &fits);
+        }
+        picture
             .save(&out)
             .map_err(|e| format!("cannot write {}: {e}", out.display()))?;
     }

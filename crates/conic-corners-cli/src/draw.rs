@@ -1,6 +1,8 @@
 //! Overlay pictures of a detection: grid edges, corners and their labels on the grey image.
 
+use conic_corners::board_fit::BoardFit;
 use conic_corners::detect::Detection;
+use conic_corners::quadratic_form::Curve;
 use conic_corners::GrayImage;
 use image::{Rgb, RgbImage};
 use imageproc::drawing::{draw_filled_circle_mut, draw_hollow_circle_mut, draw_line_segment_mut};
@@ -60,6 +62,59 @@ fn draw_text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, colour:
             }
         }
         cx += 4 * scale;
+    }
+}
+
+/// The point of `curve` nearest `p`, by two Newton steps along the gradient (the samples are within
+/// a fraction of a pixel of their curve).
+fn onto(curve: &Curve, p: [f64; 2]) -> [f64; 2] {
+    let conic = curve.as_conic();
+    let mut q = p;
+    for _ in 0..2 {
+        let [gx, gy] = conic.gradient(q[0], q[1]);
+        let g2 = gx * gx + gy * gy;
+        if !(g2 > 0.0) {
+            break;
+        }
+        let f = conic.eval(q[0], q[1]) / g2;
+        q = [q[0] - f * gx, q[1] - f * gy];
+    }
+    q
+}
+
+/// Draws the board-wide fit in the style of the paper's Fig. 9: every edge sample as a dot and
+/// each fitted segment as its curve over the samples it was fitted to.
+pub fn draw_board_fits(out: &mut RgbImage, fits: &[BoardFit]) {
+    for fit in fits {
+        for line in &fit.lines {
+            for s in &line.samples {
+                let (x, y) = (s[0].round(), s[1].round());
+                if x >= 0.0 && y >= 0.0 && (x as u32) < out.width() && (y as u32) < out.height() {
+                    out.put_pixel(x as u32, y as u32, Rgb([255, 220, 0]));
+                }
+            }
+            for seg in &line.segments {
+                let Some((curve, ..)) = &seg.fit else {
+                    continue;
+                };
+                let pts: Vec<[f64; 2]> = line.samples[seg.range()]
+                    .iter()
+                    .map(|&p| onto(curve, p))
+                    .collect();
+                for w in pts.windows(2) {
+                    let (a, b) = (w[0], w[1]);
+                    // Samples skip the corners' blurred zones; do not bridge gaps wider than that.
+                    if (a[0] - b[0]).hypot(a[1] - b[1]) < 40.0 {
+                        draw_line_segment_mut(
+                            out,
+                            (a[0] as f32, a[1] as f32),
+                            (b[0] as f32, b[1] as f32),
+                            Rgb([0, 255, 0]),
+                        );
+                    }
+                }
+            }
+        }
     }
 }
 

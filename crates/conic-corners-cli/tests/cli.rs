@@ -395,3 +395,51 @@ fn detect_rejects_absurd_parameters() {
         "/no/such.png",
     );
 }
+
+#[test]
+fn detect_board_mode_reports_paths_and_draws_the_curves() {
+    let dir = tmp_dir("board-mode");
+    let png = dir.join("board.png");
+    let truth = write_board(&png);
+    let overlay = dir.join("curves.png");
+    let out = bin()
+        .args([
+            "detect",
+            png.to_str().unwrap(),
+            "--refine",
+            "board",
+            "--draw",
+            overlay.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let v = stdout_json(&out);
+    let corners = v["boards"][0]["corners"].as_array().unwrap();
+    assert_eq!(corners.len(), truth.len());
+    let board_path = corners.iter().filter(|c| c["path"] == "board").count();
+    assert!(
+        board_path * 2 > corners.len(),
+        "{board_path} of {} on the board path",
+        corners.len()
+    );
+    for c in corners {
+        let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
+        let err = truth
+            .iter()
+            .map(|t| (t.x - x).hypot(t.y - y))
+            .fold(f64::INFINITY, f64::min);
+        assert!(err < 0.1, "corner {c} is {err} px from the truth");
+        if c["path"] == "board" {
+            assert!(c["sigma"].as_f64().unwrap() > 0.0);
+        }
+    }
+    assert!(v["timing_ms"]["board_fit"].as_f64().is_some());
+    assert!(image::open(&overlay).is_ok());
+    assert_fails(
+        &bin()
+            .args(["detect", png.to_str().unwrap(), "--refine", "global"])
+            .output()
+            .unwrap(),
+        "global",
+    );
+}
