@@ -73,7 +73,7 @@ fn onto(curve: &Curve, p: [f64; 2]) -> [f64; 2] {
     for _ in 0..2 {
         let [gx, gy] = conic.gradient(q[0], q[1]);
         let g2 = gx * gx + gy * gy;
-        if !(g2 > 0.0) {
+        if g2.is_nan() || g2 <= 0.0 {
             break;
         }
         let f = conic.eval(q[0], q[1]) / g2;
