@@ -272,6 +272,16 @@ fn write_board(path: &Path) -> Vec<conic_corners::synth::board::BoardCorner> {
     rendered.corners.into_iter().filter(|c| c.visible).collect()
 }
 
+/// A detected corner (JSON) lies within 0.1 px of a truth corner.
+fn assert_near_truth(c: &serde_json::Value, truth: &[conic_corners::synth::board::BoardCorner]) {
+    let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
+    let err = truth
+        .iter()
+        .map(|t| (t.x - x).hypot(t.y - y))
+        .fold(f64::INFINITY, f64::min);
+    assert!(err < 0.1, "corner {c} is {err} px from the truth");
+}
+
 #[test]
 fn detect_finds_and_labels_a_rendered_board() {
     let dir = tmp_dir("detect");
@@ -294,12 +304,7 @@ fn detect_finds_and_labels_a_rendered_board() {
     let corners = boards[0]["corners"].as_array().unwrap();
     assert_eq!(corners.len(), truth.len());
     for c in corners {
-        let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
-        let err = truth
-            .iter()
-            .map(|t| (t.x - x).hypot(t.y - y))
-            .fold(f64::INFINITY, f64::min);
-        assert!(err < 0.1, "corner {c} is {err} px from the truth");
+        assert_near_truth(c, &truth);
     }
     assert!(image::open(&overlay).is_ok());
     // CSV: a header and one row per corner.
@@ -423,12 +428,7 @@ fn detect_board_mode_reports_paths_and_draws_the_curves() {
         corners.len()
     );
     for c in corners {
-        let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
-        let err = truth
-            .iter()
-            .map(|t| (t.x - x).hypot(t.y - y))
-            .fold(f64::INFINITY, f64::min);
-        assert!(err < 0.1, "corner {c} is {err} px from the truth");
+        assert_near_truth(c, &truth);
         if c["path"] == "board" {
             assert!(c["sigma"].as_f64().unwrap() > 0.0);
         }

@@ -924,22 +924,23 @@ mod tests {
         v
     }
 
+    /// The fast suppression and selection equal the reference ones for every parameter set.
+    fn assert_matches_reference(score: &GrayImage) {
+        for p in all_params() {
+            let (n, tau) = (p.nms_radius, p.nms_tau);
+            assert_eq!(
+                non_maximum_suppression(score, n, tau),
+                reference_nms(score, n, tau)
+            );
+            assert_eq!(fast_select(score, &p), reference_select(score, &p), "{p:?}");
+        }
+    }
+
     #[test]
     fn fast_nms_and_selection_match_the_reference_on_board_like_scores() {
         for seed in 0..4 {
             let score = hessian_score(&board_like(173, 131, seed), 2.0);
-            for p in all_params() {
-                let (n, tau) = (p.nms_radius, p.nms_tau);
-                assert_eq!(
-                    non_maximum_suppression(&score, n, tau),
-                    reference_nms(&score, n, tau)
-                );
-                assert_eq!(
-                    fast_select(&score, &p),
-                    reference_select(&score, &p),
-                    "{p:?}"
-                );
-            }
+            assert_matches_reference(&score);
         }
     }
 
@@ -958,18 +959,7 @@ mod tests {
                 })
                 .collect();
             let score = GrayImage::from_vec(w, h, data).unwrap();
-            for p in all_params() {
-                let (n, tau) = (p.nms_radius, p.nms_tau);
-                assert_eq!(
-                    non_maximum_suppression(&score, n, tau),
-                    reference_nms(&score, n, tau)
-                );
-                assert_eq!(
-                    fast_select(&score, &p),
-                    reference_select(&score, &p),
-                    "{p:?}"
-                );
-            }
+            assert_matches_reference(&score);
         }
     }
 
