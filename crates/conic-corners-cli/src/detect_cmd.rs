@@ -36,7 +36,7 @@ pub struct DetectArgs {
     draw_dir: Option<PathBuf>,
     /// How corners are placed: `local` (single-corner refiner) or `board` (row and column curves
     /// fitted along the whole board, local where a line has too few samples).
-    #[arg(long = "refine", value_name = "MODE", default_value = "local", value_parser = ["local", "board"])]
+    #[arg(long = "refine", value_name = "MODE", default_value = "board", value_parser = ["local", "board"])]
     mode: String,
     /// Print CSV rows (image,board,row,col,x,y,score,status) instead of JSON.
     #[arg(long)]
@@ -62,6 +62,7 @@ impl DetectArgs {
         }
         params.labels.min_corners = self.min_board_corners;
         params.refine = self.refine.to_params(params.refine.clone())?;
+        params.share_sampling();
         params.mode = if self.mode == "board" {
             RefineMode::Board
         } else {

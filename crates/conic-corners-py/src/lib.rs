@@ -246,6 +246,7 @@ fn detect<'py>(
         params.labels.min_corners = m;
     }
     params.refine = refine_params(params.refine.clone(), reach, stride, blur)?;
+    params.share_sampling();
     params.validate().map_err(PyValueError::new_err)?;
     let gray = gray_from_numpy(image, bgr)?;
     let detection = py.detach(|| detect_rs(&gray, &params));

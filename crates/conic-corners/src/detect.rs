@@ -36,18 +36,18 @@ pub struct DetectParams {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum RefineMode {
     /// Each corner by the single-corner refiner ([`crate::refine`]).
-    #[default]
     Local,
     /// Each corner as the intersection of its row and column curves fitted along the whole board
     /// ([`crate::board_fit`]), the local answer where a line has too few samples.
+    #[default]
     Board,
 }
 
 impl Default for DetectParams {
-    /// Every stage's defaults, except that corners are refined from every second scanline
-    /// (`refine.stride = 2`): on a board the walks are bounded by the neighbours anyway, and this
-    /// halves the refinement time for about 0.002 px more error (median 0.006 instead of
-    /// 0.004 px on the speed benchmark's board).
+    /// Every stage's defaults, except that edges are sampled on every second scanline
+    /// (`refine.stride = board_fit.stride = 2`): this halves the sampling time for about 0.002 px
+    /// more error (median 0.004 instead of 0.003 px on the speed benchmark's board with board-wide
+    /// fitting, 0.006 instead of 0.004 px with the local refiner).
     fn default() -> Self {
         Self {
             prefilter: PrefilterParams::default(),
@@ -59,12 +59,23 @@ impl Default for DetectParams {
                 ..RefineParams::default()
             },
             mode: RefineMode::default(),
-            board_fit: BoardFitParams::default(),
+            board_fit: BoardFitParams {
+                stride: 2,
+                ..BoardFitParams::default()
+            },
         }
     }
 }
 
 impl DetectParams {
+    /// Copies the refiner's sampling settings (`stride`, `blur`) into the board-wide fit, so that
+    /// one setting controls both kinds of edge walk (the CLI and the Python package do this after
+    /// applying the user's options).
+    pub fn share_sampling(&mut self) {
+        self.board_fit.stride = self.refine.stride;
+        self.board_fit.blur = self.refine.blur;
+    }
+
     /// Checks the parameters a user sets; the message names the offending one.
     pub fn validate(&self) -> Result<(), String> {
         if self.prefilter.expected_corners == Some(0) {
@@ -159,46 +170,57 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     let graph = connect(&corners, &params.connectivity);
     let labelled = label_with(&corners, &graph, &params.labels);
     let connectivity_ms = ms(t);
-    let t = Instant::now();
-    let boards: Vec<Board> = labelled
-        .iter()
-        .map(|b| {
-            let refined: Vec<DetectedCorner> = b
-                .corners
-                .par_iter()
-                .zip(&b.labels)
-                .map(|(&i, &(row, col))| {
-                    let reach = neighbour_reach(&corners, &graph.neighbours[i], i);
-                    refine_corner(image, &corners[i], row, col, reach, &params.refine)
-                })
-                .collect();
-            Board {
+    // Board mode fits the grid lines from the pixel-level corners (the walks measure the edges
+    // themselves, and the fit only needs a corner within `max_shift` of the truth), so the local
+    // refiner runs only where the board-wide fit falls back.
+    let (mut refine_ms, mut board_fit_ms) = (0.0, 0.0);
+    let mut boards = Vec::with_capacity(labelled.len());
+    for b in &labelled {
+        let t = Instant::now();
+        let fitted = (params.mode == RefineMode::Board).then(|| {
+            let pixel = Board {
                 rows: b.rows,
                 cols: b.cols,
-                corners: refined,
-            }
-        })
-        .collect();
-    let refine_ms = ms(t);
-    let t = Instant::now();
-    let boards = match params.mode {
-        RefineMode::Local => boards,
-        RefineMode::Board => boards
-            .into_iter()
-            .map(|mut b| {
-                let fitted = fit_board(image, &b, &params.board_fit);
-                for (c, f) in b.corners.iter_mut().zip(fitted) {
-                    if f.path == Path::Board {
-                        (c.x, c.y) = (f.x, f.y);
-                        c.path = Path::Board;
-                        c.sigma = Some(f.sigma);
+                corners: b
+                    .corners
+                    .iter()
+                    .zip(&b.labels)
+                    .map(|(&i, &(row, col))| pixel_corner(&corners[i], row, col))
+                    .collect(),
+            };
+            fit_board(image, &pixel, &params.board_fit)
+        });
+        board_fit_ms += ms(t);
+        let t = Instant::now();
+        let refined: Vec<DetectedCorner> = b
+            .corners
+            .par_iter()
+            .zip(&b.labels)
+            .enumerate()
+            .map(
+                |(k, (&i, &(row, col)))| match fitted.as_ref().map(|f| &f[k]) {
+                    Some(f) if f.path == Path::Board => DetectedCorner {
+                        x: f.x,
+                        y: f.y,
+                        status: Status::Converged,
+                        path: Path::Board,
+                        sigma: Some(f.sigma),
+                        ..pixel_corner(&corners[i], row, col)
+                    },
+                    _ => {
+                        let reach = neighbour_reach(&corners, &graph.neighbours[i], i);
+                        refine_corner(image, &corners[i], row, col, reach, &params.refine)
                     }
-                }
-                b
-            })
-            .collect(),
-    };
-    let board_fit_ms = ms(t);
+                },
+            )
+            .collect();
+        refine_ms += ms(t);
+        boards.push(Board {
+            rows: b.rows,
+            cols: b.cols,
+            corners: refined,
+        });
+    }
     Detection {
         boards,
         timing: Timing {
@@ -223,6 +245,21 @@ fn neighbour_reach(corners: &[Corner], neighbours: &[Option<usize>; 4], i: usize
         .max_by(f64::total_cmp)
 }
 
+/// A labelled corner at its pixel-level (elected) position, not yet refined.
+fn pixel_corner(c: &Corner, row: i32, col: i32) -> DetectedCorner {
+    DetectedCorner {
+        x: c.x,
+        y: c.y,
+        row,
+        col,
+        score: c.score,
+        status: Status::Failed,
+        residual: None,
+        path: Path::Local,
+        sigma: None,
+    }
+}
+
 fn refine_corner(
     image: &GrayImage,
     c: &Corner,
@@ -239,12 +276,8 @@ fn refine_corner(
     DetectedCorner {
         x: r.x,
         y: r.y,
-        row,
-        col,
-        score: c.score,
         status: r.status,
         residual: r.residual,
-        path: Path::Local,
-        sigma: None,
+        ..pixel_corner(c, row, col)
     }
 }

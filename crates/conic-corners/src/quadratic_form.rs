@@ -751,6 +751,36 @@ const RSS_FLOOR: f64 = 1e-18;
 /// `weights` (default 1) must be finite and ≥ 0. Needs ≥ 3 weighted points (≥ 4 for the parabola,
 /// ≥ 6 for the conic). `None` on bad input or if all points coincide.
 pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<CurveFit> {
+    fit_edge_curve_with(points, weights, BranchGuard::Span)
+}
+
+/// Where the fold-back guard of [`fit_edge_curve_with`] requires a conic's second branch to stay
+/// away from the fitted branch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BranchGuard {
+    /// Over the whole span of the data, by a quarter of the data's half-length: right for an edge
+    /// fitted around a corner in the gap of its samples ([`fit_edge_curve`]), where a fold-back
+    /// anywhere could be a noise-fitted hyperbola.
+    Span,
+    /// Only within `clearance` px (along the edge) of `point` (image coordinates, px), by
+    /// `clearance` px: right when the curve will only be intersected near `point` and the data
+    /// may legitimately reach the end of an ellipse, where the two branches meet (a row wrapped
+    /// round a cylinder, seen up to its silhouette).
+    Near {
+        /// Where the curve will be used, image coordinates (px).
+        point: [f64; 2],
+        /// Required separation of the branches (px, > 0).
+        clearance: f64,
+    },
+}
+
+/// [`fit_edge_curve`] with a choice of where the conic's second branch must stay clear
+/// ([`BranchGuard`]); everything else is identical.
+pub fn fit_edge_curve_with(
+    points: &[[f64; 2]],
+    weights: Option<&[f64]>,
+    guard: BranchGuard,
+) -> Option<CurveFit> {
     if !valid_input(points, weights) {
         return None;
     }
@@ -842,12 +872,19 @@ pub fn fit_edge_curve(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Cu
             };
             if let Some((con, rss_con)) = conic {
                 let b = bic(rss_con, k_con);
-                let disc = min_branch_discriminant(&con, u0, u1);
                 // The far side of a real edge's conic can be close: a circle on a cylinder seen
                 // at 5° elevation is a 600 × 50 px ellipse, its back 0.5 half-lengths from the
                 // data. Only a branch much closer than that is taken for a noise-fitted fold-back
                 // (it could produce a spurious intersection next to the corner).
-                let min_sep = 0.25 * u0.abs().max(u1.abs());
+                let (lo, hi, min_sep) = match guard {
+                    BranchGuard::Span => (u0, u1, 0.25 * u0.abs().max(u1.abs())),
+                    BranchGuard::Near { point, clearance } => {
+                        let c = clearance.max(0.0) * inv;
+                        let u = fr.local(point)[0] * inv;
+                        (u - c, u + c, c)
+                    }
+                };
+                let disc = min_branch_discriminant(&con, lo, hi);
                 if b < best.0 && disc > 0.0 && disc >= (con[2] * min_sep).powi(2) {
                     best = (b, EdgeModel::Conic, con, rss_con);
                 }
@@ -1541,6 +1578,43 @@ mod tests {
         assert!(fit.curve.distance(1000.0, 700.0).abs() < 1e-6);
     }
 
+    #[test]
+    fn ellipse_up_to_its_end_needs_the_near_guard() {
+        // A row round a cylinder, seen up to 8° from its silhouette: the arc of the 300 × 40 px
+        // ellipse (x, y) = (300 cos t, 40 sin t) for t in [8°, 172°]. Near both ends the back half
+        // comes within a few px of the data, so the whole-span guard refuses the true conic and
+        // the best circle or parabola misses a point two thirds along by tenths of a pixel; guarded
+        // only near that point, the conic is kept and exact.
+        let (a, b) = (300.0, 40.0);
+        let pts: Vec<[f64; 2]> = (0..300)
+            .map(|i| {
+                let t = (8.0 + 164.0 * i as f64 / 299.0).to_radians();
+                [500.0 + a * t.cos(), 400.0 + b * t.sin()]
+            })
+            .collect();
+        let t = 40f64.to_radians();
+        let at = [500.0 + a * t.cos(), 400.0 + b * t.sin()];
+        let span = fit_edge_curve(&pts, None).unwrap();
+        assert_ne!(span.model, EdgeModel::Conic);
+        assert!(span.curve.distance(at[0], at[1]).abs() > 0.1);
+        let guard = BranchGuard::Near {
+            point: at,
+            clearance: 3.0,
+        };
+        let near = fit_edge_curve_with(&pts, None, guard).unwrap();
+        assert_eq!(near.model, EdgeModel::Conic);
+        assert!(near.curve.distance(at[0], at[1]).abs() < 1e-6);
+        // The guard still refuses a conic whose other branch passes next to the point: guarded at
+        // the end of the arc, where the two halves are 2·40·sin 8° ≈ 11 px apart, with 20 px.
+        let t = 8f64.to_radians();
+        let end = [500.0 + a * t.cos(), 400.0 + b * t.sin()];
+        let guard = BranchGuard::Near {
+            point: end,
+            clearance: 20.0,
+        };
+        let end_fit = fit_edge_curve_with(&pts, None, guard).unwrap();
+        assert_ne!(end_fit.model, EdgeModel::Conic);
+    }
     #[test]
     fn edge_curve_bad_input() {
         assert!(fit_edge_curve(&[], None).is_none());

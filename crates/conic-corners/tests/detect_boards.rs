@@ -132,8 +132,9 @@ fn scene(surface: Surface, seed: u64, edit: impl FnOnce(&mut BoardScene)) -> Boa
     random_board_scene(&mut ChaCha8Rng::seed_from_u64(seed), surface, &t)
 }
 
-/// Accuracy bound at blur 1, noise 1 %: the measured RMS is ~0.02–0.04 px (see the report).
-const RMS_BOUND: f64 = 0.1;
+/// Accuracy bound at blur 1, noise 1 % with the default board-wide fitting: the measured RMS is
+/// 0.006–0.018 px on these scenes (0.010–0.057 px with the local refiner alone).
+const RMS_BOUND: f64 = 0.04;
 
 #[test]
 fn flat_board_random_pose() {
