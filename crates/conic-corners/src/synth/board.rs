@@ -217,6 +217,11 @@ pub struct BoardScene {
     pub supersample: usize,
     /// Bars drawn over the image; they hide the corners they come near.
     pub occluders: Vec<Occluder>,
+    /// Printing dot gain (mm, |gain| < square/4): every dark square is printed this much larger on
+    /// each side (smaller if negative), so the two polarities of a grid line are offset by twice
+    /// the gain and squares of one colour overlap (or part) at the corners. The corners' truth stays
+    /// the centre of the junction, its point of symmetry.
+    pub dot_gain_mm: f64,
 }
 
 impl Default for BoardScene {
@@ -238,6 +243,7 @@ impl Default for BoardScene {
             noise: 0.0,
             supersample: 16,
             occluders: Vec::new(),
+            dot_gain_mm: 0.0,
         }
     }
 }
@@ -583,6 +589,8 @@ pub struct BoardGeometry {
     dot_cells: Vec<bool>,
     levels: [f32; 3],
     occluders: Vec<Occluder>,
+    /// Dot gain (mm), see [`BoardScene::dot_gain_mm`].
+    gain: f64,
 }
 
 fn mul3(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
@@ -703,6 +711,7 @@ impl BoardGeometry {
         }
         let i = ((fu / self.square) as usize).min(self.cols);
         let j = ((fv / self.square) as usize).min(self.rows);
+        let (i, j) = self.gained_cell(i, j, fu, fv);
         let cell = j * (self.cols + 1) + i;
         let dot = !self.dot_cells.is_empty() && self.dot_cells[cell] && {
             let du = fu - (i as f64 + 0.5) * self.square;
@@ -710,6 +719,31 @@ impl BoardGeometry {
             du * du + dv * dv < self.dot_radius * self.dot_radius
         };
         ((cell as u32) << 1) | dot as u32
+    }
+
+    /// The square whose ink covers sheet point `(fu, fv)` (mm from the top-left of the squares)
+    /// of square `(i, j)` under dot gain: a point within `gain` of a side of a light square takes
+    /// the dark neighbour across that side (all four are dark); with negative gain a point within
+    /// `|gain|` of a side of a dark square takes the light neighbour. Sides on the board's outline
+    /// have no neighbour and stay put.
+    fn gained_cell(&self, i: usize, j: usize, fu: f64, fv: f64) -> (usize, usize) {
+        let g = self.gain.abs();
+        if g == 0.0 || ((i + j) % 2 == 0) == (self.gain > 0.0) {
+            return (i, j);
+        }
+        let du = fu - i as f64 * self.square;
+        let dv = fv - j as f64 * self.square;
+        let sides = [
+            (du, i > 0, (i.wrapping_sub(1), j)),
+            (self.square - du, i < self.cols, (i + 1, j)),
+            (dv, j > 0, (i, j.wrapping_sub(1))),
+            (self.square - dv, j < self.rows, (i, j + 1)),
+        ];
+        sides
+            .into_iter()
+            .filter(|&(d, inside, _)| inside && d < g)
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or((i, j), |(_, _, n)| n)
     }
 
     /// Region label seen at image point `(x, y)`.
@@ -967,6 +1001,8 @@ impl BoardScene {
         check("noise", self.noise, self.noise >= 0.0, ">= 0")?;
         let ss = self.supersample;
         check("supersample", ss as f64, (1..=64).contains(&ss), "1..=64")?;
+        let g = self.dot_gain_mm;
+        check("dot_gain_mm", g, g.abs() < 0.25 * self.square_mm, "|gain| < square/4")?;
         for o in &self.occluders {
             check("occluder.width", o.width, o.width > 0.0, "> 0")?;
             for v in [o.from[0], o.from[1], o.to[0], o.to[1], o.intensity] {
@@ -1040,6 +1076,7 @@ impl BoardScene {
             dot_cells,
             levels: [self.black, self.white, self.background].map(|v| v as f32),
             occluders: self.occluders.clone(),
+            gain: self.dot_gain_mm,
         })
     }
 
@@ -1269,6 +1306,42 @@ mod tests {
         assert!((at([0.0, 35.0]) - 0.9).abs() < 1e-6);
         assert!((at([0.0, 55.0]) - 0.5).abs() < 1e-6);
         assert!((img.get(0, 0) as f64 / gain(0, 0) - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn dot_gain_grows_the_dark_squares_and_keeps_the_outline() {
+        // 2 px per mm, 10 mm squares, gain ±1 mm: the sides of a dark square move by ±2 px.
+        let colour = |gain: f64, p: [f64; 2]| {
+            let scene = BoardScene {
+                dot_gain_mm: gain,
+                ..small_scene(Surface::Flat, Isometry3::translation(0.0, 0.0, 400.0))
+            };
+            let g = scene.geometry().unwrap();
+            let img = scene.render_sharp().unwrap();
+            let q = g.sheet_to_image(p).unwrap();
+            img.get(q[0].round() as usize, q[1].round() as usize) as f64
+        };
+        // Square (1, 1) is dark (i + j even), its neighbour (2, 1) light; their common side is
+        // at u = 20 − 40 = −20 mm, v from −20 to −10 mm.
+        for (du, gain, want) in [
+            (-0.5, 0.0, 0.1),
+            (0.5, 0.0, 0.9),
+            (0.5, 1.0, 0.1),
+            (1.5, 1.0, 0.9),
+            (-0.5, -1.0, 0.9),
+            (-1.5, -1.0, 0.1),
+        ] {
+            let got = colour(gain, [-20.0 + du, -15.0]);
+            assert!((got - want).abs() < 1e-6, "du {du} gain {gain}: {got}");
+        }
+        // The outline of the squares does not grow into the margin (square (0, 0) is dark).
+        // (The pixel touches the outline: its area-sampled value is white to 1e-5.)
+        assert!((colour(1.0, [-40.5, -25.0]) - 0.9).abs() < 1e-4);
+        let bad = BoardScene {
+            dot_gain_mm: 3.0,
+            ..small_scene(Surface::Flat, Isometry3::translation(0.0, 0.0, 400.0))
+        };
+        assert!(bad.validate().is_err());
     }
 
     #[test]
