@@ -19,6 +19,10 @@
 //!    three corners) and then predicts each crossing from a line through the last samples. Beyond
 //!    the first and last corner the edge continues along the outer squares: the chain is extended
 //!    there until the edge ends. The blur σ is measured by a pilot walk over a few segments.
+//!    The offset between the line's two polarities (a print's dot gain moves every edge towards
+//!    its light side, so consecutive segments are offset across the line) is measured at the
+//!    corners and removed (`remove_polarity_offset`), which puts every corner at the centre of its
+//!    junction.
 //! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
 //! 3. **Fitting** (III-F): [`fit_edge_curve`] per piece, with samples farther than 3.5 robust
 //!    standard deviations (MAD) from the curve rejected and the fit repeated until stable, so a pen
@@ -191,6 +195,9 @@ pub struct FittedLine {
     pub samples: Vec<[f64; 2]>,
     /// Pieces of the chain, in order, covering all samples.
     pub segments: Vec<FittedSegment>,
+    /// Offset (px) between the edges of the two polarities of the line, removed from `samples`
+    /// before fitting: about twice the print's dot gain (see the module docs).
+    pub polarity_offset: f64,
 }
 
 /// Everything [`fit_board_with_curves`] computed: the corners, the lines for drawing, the blur.
@@ -732,6 +739,7 @@ fn sample_and_fit_line(
             walk_edge(image, &w, cfg, &mut pts, None);
         }
     }
+    let offset = remove_polarity_offset(&mut pts, &cuts);
     let ranges = segment_chain(&pts, &params.segmentation);
     let mut scratch = Vec::new();
     let mut segments = Vec::with_capacity(ranges.len());
@@ -752,9 +760,125 @@ fn sample_and_fit_line(
             index: line.index,
             samples: pts,
             segments,
+            polarity_offset: offset,
         },
         cuts,
     )
+}
+
+/// Samples on each side of a corner that measure the chain's jump there.
+const JUMP_SAMPLES: usize = 12;
+
+/// Estimates and removes the offset between the two polarities of a grid line, returning its
+/// median over the line (px; 0 when it is not significant and nothing was moved).
+///
+/// Along a grid line the dark square lies on alternate sides from one corner to the next. A print
+/// with dot gain (dark squares grown by `g`) moves every edge towards its light side, so the
+/// samples of consecutive segments are offset across the line by `±g`: a jump of `2g`, alternating
+/// in sign, at every corner. A curve through both polarities then zigzags, and the segmentation
+/// cuts the chain at every corner, leaving one-sided pieces whose intersections are off by `g`.
+/// The centre of the junction (the corner's point of symmetry) lies midway, so each sample is
+/// moved back by half the offset of its polarity.
+///
+/// At each corner `j` the jump `δⱼ` is the indicator coefficient of the least-squares fit
+/// `v = a + b u + c u² + δⱼ s` to the last and first [`JUMP_SAMPLES`] samples before and after it
+/// (`u` along the chord between them, `v` across, `s = ±½` by side), and `Dⱼ = (−1)ʲ⁺¹ δⱼ` is the
+/// offset there. Offsets are corrected only if their median `D` is larger than three standard
+/// errors (`1.4826 MAD √(π / 2n)`), so a clean print is left untouched. Each `Dⱼ` is then
+/// replaced by the median of it and its two neighbours (a missing one by `D`), because on a bent
+/// board the offset in px changes along the line with the foreshortening, and segment `k`
+/// (samples between corners `k − 1` and `k`) is shifted by `−(−1)ᵏ D/2` along the unit normal of
+/// its chord, `D` interpolated linearly between its two corners. `cuts` holds the chain position of
+/// every corner, in order.
+fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 {
+    let local: Vec<Option<f64>> = cuts
+        .iter()
+        .enumerate()
+        .map(|(j, &(_, cut))| {
+            let before = &pts[cut.saturating_sub(JUMP_SAMPLES)..cut];
+            let after = &pts[cut..(cut + JUMP_SAMPLES).min(pts.len())];
+            jump_at(before, after).map(|d| if j % 2 == 0 { -d } else { d })
+        })
+        .collect();
+    let mut all: Vec<f64> = local.iter().flatten().copied().collect();
+    if all.len() < 3 {
+        return 0.0;
+    }
+    let median = |v: &mut [f64]| {
+        let mid = v.len() / 2;
+        *v.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    let offset = median(&mut all);
+    let n = all.len() as f64;
+    for d in all.iter_mut() {
+        *d = (*d - offset).abs();
+    }
+    let se = 1.4826 * median(&mut all) * (std::f64::consts::FRAC_PI_2 / n).sqrt();
+    if offset.abs() <= 3.0 * se {
+        return 0.0;
+    }
+    let at = |j: usize| local[j].unwrap_or(offset);
+    let smooth: Vec<f64> = (0..cuts.len())
+        .map(|j| {
+            let mut w = [
+                if j > 0 { at(j - 1) } else { offset },
+                at(j),
+                local.get(j + 1).map_or(offset, |_| at(j + 1)),
+            ];
+            median(&mut w)
+        })
+        .collect();
+    let mut start = 0;
+    for k in 0..=cuts.len() {
+        let end = cuts.get(k).map_or(pts.len(), |c| c.1).max(start);
+        let d0 = smooth[k.saturating_sub(1)];
+        let d1 = smooth[k.min(cuts.len() - 1)];
+        let seg = &mut pts[start..end];
+        if seg.len() >= 2 {
+            let (a, b) = (seg[0], seg[seg.len() - 1]);
+            if let Some(t) = normalize([b[0] - a[0], b[1] - a[1]]) {
+                let sign = if k % 2 == 0 { -0.5 } else { 0.5 };
+                let last = (seg.len() - 1) as f64;
+                for (i, p) in seg.iter_mut().enumerate() {
+                    let f = i as f64 / last;
+                    let shift = sign * (d0 + f * (d1 - d0));
+                    p[0] += shift * t[1];
+                    p[1] -= shift * t[0];
+                }
+            }
+        }
+        start = end;
+    }
+    offset
+}
+
+/// The jump across the line from `before` to `after` (see [`remove_polarity_offset`]), measured
+/// along the normal `(t_y, −t_x)` of the chord `t`; `None` with fewer than four samples a side or a
+/// degenerate fit.
+fn jump_at(before: &[[f64; 2]], after: &[[f64; 2]]) -> Option<f64> {
+    if before.len() < 4 || after.len() < 4 {
+        return None;
+    }
+    let (a, b) = (before[0], after[after.len() - 1]);
+    let t = normalize([b[0] - a[0], b[1] - a[1]])?;
+    let len = dist(a, b);
+    let (o0, o1) = (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]));
+    let mut ata = nalgebra::Matrix4::<f64>::zeros();
+    let mut atv = nalgebra::Vector4::<f64>::zeros();
+    for (side, p) in before
+        .iter()
+        .map(|p| (-0.5, p))
+        .chain(after.iter().map(|p| (0.5, p)))
+    {
+        let (dx, dy) = (p[0] - o0, p[1] - o1);
+        let u = (dx * t[0] + dy * t[1]) / len;
+        let v = dx * t[1] - dy * t[0];
+        let row = nalgebra::Vector4::new(1.0, u, u * u, side);
+        ata += row * row.transpose();
+        atv += row * v;
+    }
+    let sol = ata.cholesky()?.solve(&atv);
+    sol[3].is_finite().then_some(sol[3])
 }
 
 /// The open walk from end corner `e` away from its neighbour `n`, up to one square.
@@ -1235,6 +1359,42 @@ mod tests {
     }
 
     #[test]
+    fn dot_gain_is_measured_and_removed() {
+        // Dark squares printed 0.3 mm larger on each side: 2.67 px/mm at 600 mm, so the two
+        // polarities of every line are 1.6 px apart. The truth is the centre of each junction.
+        let s = BoardScene {
+            dot_gain_mm: 0.3,
+            ..scene(Surface::Flat, 1.0, 0.008, 10.0)
+        };
+        let r = s.render(5).unwrap();
+        let board = board_from_truth(&r.corners, 5);
+        let fit = fit_board_with_curves(&r.image, &board, &BoardFitParams::default());
+        for l in &fit.lines {
+            assert!(
+                (l.polarity_offset.abs() - 1.6).abs() < 0.15,
+                "{:?} {}: offset {}",
+                l.kind,
+                l.index,
+                l.polarity_offset
+            );
+        }
+        let (_, _, st) = run(&r, 5);
+        let (e, n) = rms(st.board.iter().map(|b| b.1));
+        assert_eq!(st.local, 0);
+        assert!(e < 0.015, "RMS {e} over {n}");
+        let clean = scene(Surface::Flat, 1.0, 0.008, 10.0).render(5).unwrap();
+        let fit = fit_board_with_curves(&clean.image, &board, &BoardFitParams::default());
+        // A clean print: inner lines are left alone, the outermost may show a few hundredths.
+        let moved = fit
+            .lines
+            .iter()
+            .filter(|l| l.polarity_offset != 0.0)
+            .count();
+        assert!(moved <= 2, "{moved} lines moved");
+        assert!(fit.lines.iter().all(|l| l.polarity_offset.abs() < 0.05));
+    }
+
+    #[test]
     fn occluder_across_edges_does_not_pull_corners() {
         let mut s = scene(Surface::Cylinder { radius_mm: 100.0 }, 1.0, 0.008, 10.0);
         s.occluders = vec![
@@ -1399,69 +1559,75 @@ mod tests {
             ),
             ("S80", Surface::SShape { radius_mm: 80.0 }),
         ];
-        let mut all_norm = Vec::new();
-        let mut bins = [(0.0, 0usize, 0.0, 0usize); 3];
-        for (name, surface) in cases {
-            for (blur, noise) in [(0.7, 0.0), (1.0, 0.008), (1.2, 0.008)] {
-                for seed in 0..3u64 {
-                    let r = scene(surface, blur, noise, 10.0 + 5.0 * seed as f64)
+        for gain in [0.0, 0.3] {
+            println!("dot gain {gain} mm");
+            let mut all_norm = Vec::new();
+            let mut bins = [(0.0, 0usize, 0.0, 0usize); 3];
+            for (name, surface) in cases {
+                for (blur, noise) in [(0.7, 0.0), (1.0, 0.008), (1.2, 0.008)] {
+                    for seed in 0..3u64 {
+                        let r = BoardScene {
+                            dot_gain_mm: gain,
+                            ..scene(surface, blur, noise, 10.0 + 5.0 * seed as f64)
+                        }
                         .render(seed)
                         .unwrap();
-                    let t0 = std::time::Instant::now();
-                    let (board, _, st) = run(&r, seed);
-                    let ms = t0.elapsed().as_secs_f64() * 1e3;
-                    let (e, n) = rms(st.board.iter().map(|b| b.1));
-                    let (le, ln) = local_rms(&r, &board, |_| true);
-                    for b in &st.board {
-                        all_norm.extend(b.2);
-                        let k = if b.0 < 2e-3 {
-                            0
-                        } else if b.0 < 6e-3 {
-                            1
-                        } else {
-                            2
-                        };
-                        bins[k].0 += b.1 * b.1;
-                        bins[k].1 += 1;
+                        let t0 = std::time::Instant::now();
+                        let (board, _, st) = run(&r, seed);
+                        let ms = t0.elapsed().as_secs_f64() * 1e3;
+                        let (e, n) = rms(st.board.iter().map(|b| b.1));
+                        let (le, ln) = local_rms(&r, &board, |_| true);
+                        for b in &st.board {
+                            all_norm.extend(b.2);
+                            let k = if b.0 < 2e-3 {
+                                0
+                            } else if b.0 < 6e-3 {
+                                1
+                            } else {
+                                2
+                            };
+                            bins[k].0 += b.1 * b.1;
+                            bins[k].1 += 1;
+                        }
+                        for (k, lo, hi) in [(0, 0.0, 2e-3), (1, 2e-3, 6e-3), (2, 6e-3, 1.0)] {
+                            let (le, ln) = local_rms(&r, &board, |t| {
+                                let c = t.curvature[0].abs().max(t.curvature[1].abs());
+                                c >= lo && c < hi
+                            });
+                            bins[k].2 += le * le * ln as f64;
+                            bins[k].3 += ln;
+                        }
+                        let cover = st
+                            .board
+                            .iter()
+                            .flat_map(|b| b.2)
+                            .filter(|z| z.abs() <= 1.0)
+                            .count() as f64
+                            / (2 * st.board.len()).max(1) as f64;
+                        println!(
+                            "{name} blur {blur} noise {noise} seed {seed}: board {e:.4} px ({n}, {} local), local refiner {le:.4} ({ln}), 1σ cover {cover:.2}, {ms:.1} ms",
+                            st.local
+                        );
                     }
-                    for (k, lo, hi) in [(0, 0.0, 2e-3), (1, 2e-3, 6e-3), (2, 6e-3, 1.0)] {
-                        let (le, ln) = local_rms(&r, &board, |t| {
-                            let c = t.curvature[0].abs().max(t.curvature[1].abs());
-                            c >= lo && c < hi
-                        });
-                        bins[k].2 += le * le * ln as f64;
-                        bins[k].3 += ln;
-                    }
-                    let cover = st
-                        .board
-                        .iter()
-                        .flat_map(|b| b.2)
-                        .filter(|z| z.abs() <= 1.0)
-                        .count() as f64
-                        / (2 * st.board.len()).max(1) as f64;
-                    println!(
-                        "{name} blur {blur} noise {noise} seed {seed}: board {e:.4} px ({n}, {} local), local refiner {le:.4} ({ln}), 1σ cover {cover:.2}, {ms:.1} ms",
-                        st.local
-                    );
                 }
             }
-        }
-        for (k, b) in bins.iter().enumerate() {
+            for (k, b) in bins.iter().enumerate() {
+                println!(
+                    "curvature bin {k}: board RMS {:.4} ({}), local RMS {:.4} ({})",
+                    (b.0 / b.1.max(1) as f64).sqrt(),
+                    b.1,
+                    (b.2 / b.3.max(1) as f64).sqrt(),
+                    b.3
+                );
+            }
+            let within =
+                all_norm.iter().filter(|z| z.abs() <= 1.0).count() as f64 / all_norm.len() as f64;
+            let within2 =
+                all_norm.iter().filter(|z| z.abs() <= 2.0).count() as f64 / all_norm.len() as f64;
             println!(
-                "curvature bin {k}: board RMS {:.4} ({}), local RMS {:.4} ({})",
-                (b.0 / b.1.max(1) as f64).sqrt(),
-                b.1,
-                (b.2 / b.3.max(1) as f64).sqrt(),
-                b.3
+                "per-axis |error| ≤ 1σ: {within:.3}, ≤ 2σ: {within2:.3} over {}",
+                all_norm.len()
             );
         }
-        let within =
-            all_norm.iter().filter(|z| z.abs() <= 1.0).count() as f64 / all_norm.len() as f64;
-        let within2 =
-            all_norm.iter().filter(|z| z.abs() <= 2.0).count() as f64 / all_norm.len() as f64;
-        println!(
-            "per-axis |error| ≤ 1σ: {within:.3}, ≤ 2σ: {within2:.3} over {}",
-            all_norm.len()
-        );
     }
 }

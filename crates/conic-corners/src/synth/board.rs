@@ -1002,7 +1002,12 @@ impl BoardScene {
         let ss = self.supersample;
         check("supersample", ss as f64, (1..=64).contains(&ss), "1..=64")?;
         let g = self.dot_gain_mm;
-        check("dot_gain_mm", g, g.abs() < 0.25 * self.square_mm, "|gain| < square/4")?;
+        check(
+            "dot_gain_mm",
+            g,
+            g.abs() < 0.25 * self.square_mm,
+            "|gain| < square/4",
+        )?;
         for o in &self.occluders {
             check("occluder.width", o.width, o.width > 0.0, "> 0")?;
             for v in [o.from[0], o.from[1], o.to[0], o.to[1], o.intensity] {
