@@ -24,9 +24,10 @@
 //!    corners and removed (`remove_polarity_offset`), which puts every corner at the centre of its
 //!    junction.
 //! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
-//! 3. **Fitting** (III-F): [`fit_edge_curve_with`] per piece (guarded near the corner, see [`BranchGuard`]), with samples farther than 3.5 robust
-//!    standard deviations (MAD) from the curve rejected and the fit repeated until stable, so a pen
-//!    stroke or highlight across an edge does not pull the curve.
+//! 3. **Fitting** (III-F): [`fit_edge_curve_with`] per piece, its fold-back guard only near the
+//!    corner ([`BranchGuard::Near`]), with samples farther than 3.5 robust standard deviations
+//!    (MAD) from the curve rejected and the fit repeated until stable, so a pen stroke or
+//!    highlight across an edge does not pull the curve.
 //! 4. **Corners**: [`nearest_intersection`] of the piece of the row chain and of the column chain
 //!    that hold the corner, near the local position. A corner falls back to the local position
 //!    ([`Path::Local`], with a [`Fallback`] reason) when a curve has too few samples near it, a
