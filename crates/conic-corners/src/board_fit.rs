@@ -770,6 +770,9 @@ fn sample_and_fit_line(
 /// Samples on each side of a corner that measure the chain's jump there.
 const JUMP_SAMPLES: usize = 12;
 
+/// Samples on each side whose chord gives the local normal when a sample is moved.
+const NORMAL_SPAN: usize = 4;
+
 /// Estimates and removes the offset between the two polarities of a grid line, returning its
 /// median over the line (px; 0 when it is not significant and nothing was moved).
 ///
@@ -789,8 +792,8 @@ const JUMP_SAMPLES: usize = 12;
 /// replaced by the median of it and its two neighbours (a missing one by `D`), because on a bent
 /// board the offset in px changes along the line with the foreshortening, and segment `k`
 /// (samples between corners `k − 1` and `k`) is shifted by `−(−1)ᵏ D/2` along the unit normal of
-/// its chord, `D` interpolated linearly between its two corners. `cuts` holds the chain position of
-/// every corner, in order.
+/// the chain (the chord over a few neighbouring samples), `D` interpolated linearly between its two
+/// corners. `cuts` holds the chain position of every corner, in order.
 fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 {
     let local: Vec<Option<f64>> = cuts
         .iter()
@@ -836,13 +839,18 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
         let d1 = smooth[k.min(cuts.len() - 1)];
         let seg = &mut pts[start..end];
         if seg.len() >= 2 {
-            let (a, b) = (seg[0], seg[seg.len() - 1]);
-            if let Some(t) = normalize([b[0] - a[0], b[1] - a[1]]) {
-                let sign = if k % 2 == 0 { -0.5 } else { 0.5 };
-                let last = (seg.len() - 1) as f64;
-                for (i, p) in seg.iter_mut().enumerate() {
-                    let f = i as f64 / last;
-                    let shift = sign * (d0 + f * (d1 - d0));
+            let sign = if k % 2 == 0 { -0.5 } else { 0.5 };
+            let last = seg.len() - 1;
+            // Along the local normal (the chord over a few neighbours, on the unshifted samples):
+            // the normal of a bent segment's chord can be 20° off, which would leave 6 % of it.
+            let orig = seg.to_vec();
+            for (i, p) in seg.iter_mut().enumerate() {
+                let (a, b) = (
+                    orig[i.saturating_sub(NORMAL_SPAN)],
+                    orig[(i + NORMAL_SPAN).min(last)],
+                );
+                if let Some(t) = normalize([b[0] - a[0], b[1] - a[1]]) {
+                    let shift = sign * (d0 + i as f64 / last as f64 * (d1 - d0));
                     p[0] += shift * t[1];
                     p[1] -= shift * t[0];
                 }
