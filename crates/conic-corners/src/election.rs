@@ -4,7 +4,7 @@
 //!
 //! Positions are image coordinates (x right, y down, pixel centres at integers).
 
-use crate::prefilter::{prefilter, Candidate, PrefilterParams};
+use crate::prefilter::{box_downsample, prefilter, Candidate, PrefilterParams};
 use crate::GrayImage;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -380,7 +380,8 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     let Some(stride) = coarse_stride(&fine) else {
         return fine;
     };
-    let Some(coarse) = downsample(image, stride) else {
+    let Some(coarse) = box_downsample(image, stride).filter(|c| c.width().min(c.height()) >= 16)
+    else {
         return fine;
     };
     let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
@@ -451,30 +452,6 @@ fn coarse_stride(fine: &[Corner]) -> Option<usize> {
     let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
     let stride = (COARSE_WINDOW_OF_STEP * step / TEMPLATE_SIDE as f64).floor();
     (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
-}
-
-/// `image` averaged over `stride × stride` blocks (the incomplete last row and column of blocks
-/// dropped): coarse pixel `(X, Y)` has its centre at full-resolution `(sX + (s−1)/2, sY + (s−1)/2)`.
-/// `None` if fewer than 16 × 16 coarse pixels remain.
-fn downsample(image: &GrayImage, stride: usize) -> Option<GrayImage> {
-    let (w, h) = (image.width() / stride, image.height() / stride);
-    if w < 16 || h < 16 {
-        return None;
-    }
-    let mut out = vec![0f32; w * h];
-    let norm = 1.0 / (stride * stride) as f32;
-    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
-        for r in 0..stride {
-            let row = image.row(y * stride + r);
-            for (x, d) in dst.iter_mut().enumerate() {
-                *d += row[x * stride..(x + 1) * stride].iter().sum::<f32>();
-            }
-        }
-        for d in dst.iter_mut() {
-            *d *= norm;
-        }
-    }
-    GrayImage::from_vec(w, h, out).ok()
 }
 
 /// Subpixel saddle point near pixel `(x, y)`: the stationary point of the quadratic surface fitted

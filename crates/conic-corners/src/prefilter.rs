@@ -14,6 +14,13 @@ pub const MAX_SIGMA: f32 = 32.0;
 /// Kernel radius in units of σ. A Gaussian truncated at 3σ loses 0.3 % of its mass; the derivative
 /// kernels are corrected for the truncation (see [`Kernels`]), so the score is unbiased.
 const RADIUS_SIGMAS: f32 = 3.0;
+/// Smallest `sigma` for which [`PrefilterParams::half_resolution`] applies: the half-resolution
+/// scale `√(σ² − ¼)/2` is then at least 0.7 half-resolution pixels, enough for the sampled kernels
+/// to stay Gaussian-like and for the 2 × 2 average not to alias the saddles away.
+pub const MIN_HALF_RESOLUTION_SIGMA: f32 = 1.5;
+/// Half-resolution candidates are placed at the best full-resolution pixel among the
+/// `RELOCATE_SIDE²` nearest to the centre of their 2 × 2 block (offsets −2..=3).
+const RELOCATE_SIDE: usize = 6;
 /// Rows per parallel band of [`hessian_score`]: large enough that the `2r` rows of horizontal
 /// pass each band recomputes at its top are a small overhead.
 const BAND_ROWS: usize = 64;
@@ -296,18 +303,110 @@ fn score_band_generic<const FUSED: bool>(
 /// bands in parallel on the rayon pool; each band keeps a ring of `2r+1` horizontally filtered rows,
 /// so the work is `O(r)` per pixel and the extra memory is `O(r·width)` per band.
 pub fn hessian_score(image: &GrayImage, sigma: f32) -> GrayImage {
-    let sigma = if sigma.is_nan() {
-        2.0
-    } else {
-        sigma.clamp(MIN_SIGMA, MAX_SIGMA)
-    };
-    let k = Kernels::new(sigma);
+    let k = Kernels::new(valid_sigma(sigma));
     let (w, h) = (image.width(), image.height());
     let mut out = vec![0f32; w * h];
     out.par_chunks_mut(BAND_ROWS * w)
         .enumerate()
         .for_each(|(b, band)| score_band(image, &k, b * BAND_ROWS, band));
     GrayImage::from_vec(w, h, out).expect("same size as the input image")
+}
+
+/// `sigma` clamped to [`MIN_SIGMA`]..=[`MAX_SIGMA`], a NaN replaced by 2.
+fn valid_sigma(sigma: f32) -> f32 {
+    if sigma.is_nan() {
+        2.0
+    } else {
+        sigma.clamp(MIN_SIGMA, MAX_SIGMA)
+    }
+}
+
+/// [`hessian_score`] at the pixels `x0..x0 + side` × `y0..y0 + side` (clipped to the image),
+/// written row-major into `out[..side²]` (clipped pixels get `−∞`): the same kernels and clamped
+/// border, so the values agree with the whole-image score to rounding. `scratch` holds the
+/// horizontal passes (`3·side·(side + 2r)` values, grown once and reused across calls).
+fn score_window(
+    image: &GrayImage,
+    k: &Kernels,
+    (x0, y0): (usize, usize),
+    side: usize,
+    scratch: &mut Vec<f32>,
+    out: &mut [f32],
+) {
+    let (w, h) = (image.width() as isize, image.height() as isize);
+    let r = k.radius() as isize;
+    let rows = side + 2 * k.radius();
+    scratch.resize(3 * side * rows, 0.0);
+    let (h0, rest) = scratch.split_at_mut(side * rows);
+    let (h1, h2) = rest.split_at_mut(side * rows);
+    let col = |x: isize| x.clamp(0, w - 1) as usize;
+    for j in 0..rows {
+        let row = image.row((y0 as isize - r + j as isize).clamp(0, h - 1) as usize);
+        for i in 0..side {
+            let x = (x0 + i) as isize;
+            let c = row[col(x)];
+            let (mut a0, mut a1, mut a2) = (k.g[0] * c, 0.0, k.d2[0] * c);
+            for t in 1..=r {
+                let (right, left) = (row[col(x + t)], row[col(x - t)]);
+                let tu = t as usize;
+                a0 += k.g[tu] * (right + left);
+                a1 += k.d1[tu] * (right - left);
+                a2 += k.d2[tu] * (right + left);
+            }
+            (h0[j * side + i], h1[j * side + i], h2[j * side + i]) = (a0, a1, a2);
+        }
+    }
+    let r = k.radius();
+    for (j, out_row) in out[..side * side].chunks_exact_mut(side).enumerate() {
+        for (i, o) in out_row.iter_mut().enumerate() {
+            if x0 + i >= w as usize || y0 + j >= h as usize {
+                *o = f32::NEG_INFINITY;
+                continue;
+            }
+            let at = |buf: &[f32], dj: usize| buf[(j + dj) * side + i];
+            let mut xx = k.g[0] * at(h2, r);
+            let mut yy = k.d2[0] * at(h0, r);
+            let mut xy = 0.0;
+            for t in 1..=r {
+                xx += k.g[t] * (at(h2, r + t) + at(h2, r - t));
+                yy += k.d2[t] * (at(h0, r + t) + at(h0, r - t));
+                xy += k.d1[t] * (at(h1, r + t) - at(h1, r - t));
+            }
+            *o = xy * xy - xx * yy;
+        }
+    }
+}
+
+/// `image` averaged over `stride × stride` blocks, the incomplete last row and column of blocks
+/// dropped: pixel `(X, Y)` of the result has its centre at `(s·X + (s−1)/2, s·Y + (s−1)/2)` in
+/// `image`. `None` when `stride` is 0 or larger than the image.
+pub fn box_downsample(image: &GrayImage, stride: usize) -> Option<GrayImage> {
+    if stride == 0 {
+        return None;
+    }
+    let (w, h) = (image.width() / stride, image.height() / stride);
+    let mut out = vec![0f32; w * h];
+    // Rows are summed element-wise first (vectorizable), then each run of `stride` columns.
+    let mut acc = vec![0f32; w * stride];
+    let norm = 1.0 / (stride * stride) as f32;
+    for (y, dst) in out.chunks_exact_mut(w.max(1)).enumerate() {
+        acc.copy_from_slice(&image.row(y * stride)[..w * stride]);
+        for r in 1..stride {
+            for (a, &v) in acc.iter_mut().zip(&image.row(y * stride + r)[..w * stride]) {
+                *a += v;
+            }
+        }
+        if stride == 2 {
+            for (d, pair) in dst.iter_mut().zip(acc.chunks_exact(2)) {
+                *d = (pair[0] + pair[1]) * norm;
+            }
+        } else {
+            for (d, run) in dst.iter_mut().zip(acc.chunks_exact(stride)) {
+                *d = run.iter().sum::<f32>() * norm;
+            }
+        }
+    }
+    GrayImage::from_vec(w, h, out).ok()
 }
 
 /// A corner candidate: an integer pixel and its Hessian score [`hessian_score`].
@@ -351,6 +450,11 @@ pub struct PrefilterParams {
     pub min_score_rel: f32,
     /// Hard cap on the number of candidates returned (the strongest are kept), whatever the rule.
     pub max_candidates: usize,
+    /// Find the candidates on the image averaged over 2 × 2 blocks, then place each at the best
+    /// full-resolution pixel near it (see [`prefilter`]): about 5× faster, and the same corners,
+    /// as long as `sigma ≥` [`MIN_HALF_RESOLUTION_SIGMA`] (below it the full-resolution score is
+    /// used whatever this says).
+    pub half_resolution: bool,
 }
 
 impl Default for PrefilterParams {
@@ -362,6 +466,7 @@ impl Default for PrefilterParams {
             expected_corners: None,
             min_score_rel: 0.05,
             max_candidates: 20_000,
+            half_resolution: true,
         }
     }
 }
@@ -573,8 +678,77 @@ fn visit_descending(
 /// The result is that of sorting the whole suppression output, but only the block maxima that
 /// can make the cut are checked: they are visited strongest first, and the visit stops once the
 /// count is reached or the scores fall below the adaptive threshold.
+///
+/// With [`PrefilterParams::half_resolution`] (the default) and `sigma ≥`
+/// [`MIN_HALF_RESOLUTION_SIGMA`], all of this runs on the image averaged over 2 × 2 blocks at the
+/// equivalent scale, and each candidate is then moved to the best full-resolution pixel within
+/// 2–3 px of its block: positions and scores are full-resolution ones, a quarter of the pixels
+/// are filtered with kernels half as long. Two candidates may then be closer than `nms_radius`
+/// (they come from different blocks); the election merges such duplicates.
 pub fn prefilter(image: &GrayImage, params: &PrefilterParams) -> Vec<Candidate> {
-    select_from_score(&hessian_score(image, params.sigma), params)
+    let sigma = valid_sigma(params.sigma);
+    if params.half_resolution && sigma >= MIN_HALF_RESOLUTION_SIGMA {
+        if let Some(half) = box_downsample(image, 2).filter(|h| h.width() * h.height() > 0) {
+            return prefilter_half_resolution(image, &half, sigma, params);
+        }
+    }
+    select_from_score(&hessian_score(image, sigma), params)
+}
+
+/// The half-resolution path of [`prefilter`] ([`PrefilterParams::half_resolution`]).
+///
+/// The 2 × 2 average is a blur of variance ¼ px² followed by sampling every 2 px, so the Hessian
+/// score of `half` at scale `σ_h = √(σ² − ¼)/2` (half-resolution pixels) is, up to a constant
+/// factor, the full-resolution score at `σ` sampled at the block centres. The suppression works
+/// on half the distances (radius and margin rounded up) and the cut is the same rule. Each
+/// survivor at half-resolution `(X, Y)` is then placed at the pixel of largest full-resolution
+/// score among `x, y ∈ 2X−2 ..= 2X+3` (the true peak is within a pixel of the block centre
+/// `2X + ½`), inside the margin; candidates landing on the same pixel are merged. Scores are the
+/// full-resolution ones, order is decreasing score (ties: row-major).
+fn prefilter_half_resolution(
+    image: &GrayImage,
+    half: &GrayImage,
+    sigma: f32,
+    params: &PrefilterParams,
+) -> Vec<Candidate> {
+    let sigma_half = ((sigma * sigma - 0.25).sqrt() * 0.5).max(MIN_SIGMA);
+    let half_params = PrefilterParams {
+        nms_radius: params.nms_radius.div_ceil(2),
+        nms_tau: params.nms_tau.div_ceil(2),
+        ..*params
+    };
+    let coarse = select_from_score(&hessian_score(half, sigma_half), &half_params);
+    let k = Kernels::new(sigma);
+    let (w, h, m) = (image.width(), image.height(), params.nms_tau);
+    if w <= 2 * m || h <= 2 * m {
+        return Vec::new();
+    }
+    let mut scratch = Vec::new();
+    let mut window = [0f32; RELOCATE_SIDE * RELOCATE_SIDE];
+    let mut out: Vec<Candidate> = Vec::with_capacity(coarse.len());
+    for c in &coarse {
+        // The window, clipped to the margin.
+        let (x0, y0) = ((2 * c.x).saturating_sub(2).max(m), (2 * c.y).saturating_sub(2).max(m));
+        let (x1, y1) = ((2 * c.x + 4).min(w - m), (2 * c.y + 4).min(h - m));
+        if x0 >= x1 || y0 >= y1 {
+            continue;
+        }
+        score_window(image, &k, (x0, y0), RELOCATE_SIDE, &mut scratch, &mut window);
+        let mut best: Option<Candidate> = None;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let v = window[(y - y0) * RELOCATE_SIDE + (x - x0)];
+                if v > best.map_or(0.0, |b| b.score) {
+                    best = Some(Candidate { x, y, score: v });
+                }
+            }
+        }
+        out.extend(best);
+    }
+    out.sort_unstable_by(|a, b| (a.y, a.x).cmp(&(b.y, b.x)));
+    out.dedup_by(|a, b| (a.x, a.y) == (b.x, b.y));
+    out.sort_by(|a, b| b.score.total_cmp(&a.score).then((a.y, a.x).cmp(&(b.y, b.x))));
+    out
 }
 
 /// The suppression and cut of [`prefilter`] applied to a score image.
@@ -966,7 +1140,10 @@ mod tests {
     #[test]
     fn prefilter_is_the_selection_of_the_hessian_score() {
         let image = board_like(200, 150, 11);
-        let p = PrefilterParams::default();
+        let p = PrefilterParams {
+            half_resolution: false,
+            ..Default::default()
+        };
         let got = prefilter(&image, &p);
         assert_eq!(got, reference_select(&hessian_score(&image, p.sigma), &p));
         // A 8×6 board has 7×5 inner corners; all of them must be there.
