@@ -211,12 +211,27 @@ fn centred_patch(image: &GrayImage, x: usize, y: usize) -> Option<([f32; TEMPLAT
     (norm > 1e-4 * (1.0 + mean.abs()) * TEMPLATE_SIDE as f32).then_some((p, norm))
 }
 
+/// `Σ a[i]·b[i]` over a patch, in 8 interleaved partial sums: a sequential `f32` sum cannot be
+/// vectorized (its rounding order is fixed), this one becomes a few vector multiply-adds.
+#[inline(always)]
+fn dot(a: &[f32; TEMPLATE_LEN], b: &[f32; TEMPLATE_LEN]) -> f32 {
+    const L: usize = 8;
+    let mut acc = [0f32; L];
+    for (ca, cb) in a.chunks_exact(L).zip(b.chunks_exact(L)) {
+        for i in 0..L {
+            acc[i] += ca[i] * cb[i];
+        }
+    }
+    let tail = TEMPLATE_LEN - TEMPLATE_LEN % L;
+    let rest: f32 = (tail..TEMPLATE_LEN).map(|i| a[i] * b[i]).sum();
+    acc.iter().sum::<f32>() + rest
+}
+
 /// `|NCC|` (eq. 5) of a centred patch with bank entry `(e, d)`; the sign only tells which pair of
 /// opposite sectors is bright, and checkerboards have both kinds of corner.
 fn ncc(patch: &[f32; TEMPLATE_LEN], norm: f32, e: usize, d: usize) -> f32 {
     let t = &template_bank()[e * TEMPLATE_STEPS + d];
-    let dot: f32 = patch.iter().zip(t).map(|(a, b)| a * b).sum();
-    (dot / norm).abs()
+    (dot(patch, t) / norm).abs()
 }
 
 /// Parameters of [`elect`].
@@ -318,10 +333,9 @@ fn score_candidate(
         }
     }
     // NCC of the patch with itself rotated by 180° about the candidate (same pixels, same mean).
-    let symmetry = (0..TEMPLATE_LEN)
-        .map(|i| patch[i] * patch[TEMPLATE_LEN - 1 - i])
-        .sum::<f32>()
-        / (norm * norm);
+    let mut rotated = patch;
+    rotated.reverse();
+    let symmetry = dot(&patch, &rotated) / (norm * norm);
     let symmetric = symmetry as f64 >= params.min_symmetry;
     // The amplitude of the corner: the least-squares gain of the unit-norm template.
     let amplitude = best * norm;
@@ -341,7 +355,7 @@ fn score_candidate(
 /// pixels right at the centre, a residual near half the contrast.
 fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel: f64) -> bool {
     let t = &template_bank()[e * TEMPLATE_STEPS + d];
-    let b: f32 = patch.iter().zip(t).map(|(a, b)| a * b).sum();
+    let b = dot(patch, t);
     let (lo, hi) = t
         .iter()
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {

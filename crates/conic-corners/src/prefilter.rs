@@ -19,8 +19,9 @@ const RADIUS_SIGMAS: f32 = 3.0;
 /// to stay Gaussian-like and for the 2 × 2 average not to alias the saddles away.
 pub const MIN_HALF_RESOLUTION_SIGMA: f32 = 1.5;
 /// Half-resolution candidates are placed at the best full-resolution pixel among the
-/// `RELOCATE_SIDE²` nearest to the centre of their 2 × 2 block (offsets −2..=3).
-const RELOCATE_SIDE: usize = 6;
+/// `RELOCATE_SIDE²` nearest to the centre of their 2 × 2 block (offsets −3..=4): the true peak is
+/// within a pixel or two of it, and 8 is one AVX2 vector of `f32`.
+const RELOCATE_SIDE: usize = 8;
 /// Rows per parallel band of [`hessian_score`]: large enough that the `2r` rows of horizontal
 /// pass each band recomputes at its top are a small overhead.
 const BAND_ROWS: usize = 64;
@@ -321,60 +322,101 @@ fn valid_sigma(sigma: f32) -> f32 {
     }
 }
 
-/// [`hessian_score`] at the pixels `x0..x0 + side` × `y0..y0 + side` (clipped to the image),
-/// written row-major into `out[..side²]` (clipped pixels get `−∞`): the same kernels and clamped
-/// border, so the values agree with the whole-image score to rounding. `scratch` holds the
-/// horizontal passes (`3·side·(side + 2r)` values, grown once and reused across calls).
-fn score_window(
+/// Moves half-resolution candidates to full resolution: each one, at half-resolution `(X, Y)`,
+/// goes to the pixel of largest [`hessian_score`] (same kernels `k`, so the same values to
+/// rounding) among `x, y ∈ 2X−3 ..= 2X+4` (centred on the block centre `2X + ½`) inside the
+/// `margin`, if that score is positive. Dispatches to AVX2 + FMA like [`score_band`].
+fn relocate(image: &GrayImage, k: &Kernels, coarse: &[Candidate], margin: usize) -> Vec<Candidate> {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: AVX2 and FMA support were just checked at run time.
+        return unsafe { relocate_avx2(image, k, coarse, margin) };
+    }
+    relocate_generic::<false>(image, k, coarse, margin)
+}
+
+/// [`relocate_generic`] compiled for AVX2 + FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn relocate_avx2(
     image: &GrayImage,
     k: &Kernels,
-    (x0, y0): (usize, usize),
-    side: usize,
-    scratch: &mut Vec<f32>,
-    out: &mut [f32],
-) {
-    let (w, h) = (image.width() as isize, image.height() as isize);
-    let r = k.radius() as isize;
-    let rows = side + 2 * k.radius();
-    scratch.resize(3 * side * rows, 0.0);
-    let (h0, rest) = scratch.split_at_mut(side * rows);
-    let (h1, h2) = rest.split_at_mut(side * rows);
-    let col = |x: isize| x.clamp(0, w - 1) as usize;
-    for j in 0..rows {
-        let row = image.row((y0 as isize - r + j as isize).clamp(0, h - 1) as usize);
-        for i in 0..side {
-            let x = (x0 + i) as isize;
-            let c = row[col(x)];
-            let (mut a0, mut a1, mut a2) = (k.g[0] * c, 0.0, k.d2[0] * c);
-            for t in 1..=r {
-                let (right, left) = (row[col(x + t)], row[col(x - t)]);
-                let tu = t as usize;
-                a0 += k.g[tu] * (right + left);
-                a1 += k.d1[tu] * (right - left);
-                a2 += k.d2[tu] * (right + left);
-            }
-            (h0[j * side + i], h1[j * side + i], h2[j * side + i]) = (a0, a1, a2);
-        }
+    coarse: &[Candidate],
+    margin: usize,
+) -> Vec<Candidate> {
+    relocate_generic::<true>(image, k, coarse, margin)
+}
+
+/// See [`relocate`]: the `8 × 8` window is filtered as one vector-wide strip of `8 + 2r` rows
+/// with the inner loops of [`hessian_score`].
+#[inline(always)]
+fn relocate_generic<const FUSED: bool>(
+    image: &GrayImage,
+    k: &Kernels,
+    coarse: &[Candidate],
+    margin: usize,
+) -> Vec<Candidate> {
+    const SIDE: usize = RELOCATE_SIDE;
+    let (w, h, m) = (image.width(), image.height(), margin);
+    let mut out = Vec::with_capacity(coarse.len());
+    if w <= 2 * m || h <= 2 * m {
+        return out;
     }
     let r = k.radius();
-    for (j, out_row) in out[..side * side].chunks_exact_mut(side).enumerate() {
-        for (i, o) in out_row.iter_mut().enumerate() {
-            if x0 + i >= w as usize || y0 + j >= h as usize {
-                *o = f32::NEG_INFINITY;
-                continue;
-            }
-            let at = |buf: &[f32], dj: usize| buf[(j + dj) * side + i];
-            let mut xx = k.g[0] * at(h2, r);
-            let mut yy = k.d2[0] * at(h0, r);
-            let mut xy = 0.0;
-            for t in 1..=r {
-                xx += k.g[t] * (at(h2, r + t) + at(h2, r - t));
-                yy += k.d2[t] * (at(h0, r + t) + at(h0, r - t));
-                xy += k.d1[t] * (at(h1, r + t) - at(h1, r - t));
-            }
-            *o = xy * xy - xx * yy;
+    let span = SIDE + 2 * r;
+    let mut s = BandScratch {
+        padded: vec![0.0; SIDE + 2 * r],
+        h0: vec![0.0; span * SIDE],
+        h1: vec![0.0; span * SIDE],
+        h2: vec![0.0; span * SIDE],
+    };
+    let slots: Vec<usize> = (0..span).collect();
+    let mut scores = [0f32; SIDE];
+    for c in coarse {
+        // Window origin; the search region is the window clipped to the margin.
+        let (wx, wy) = ((2 * c.x).saturating_sub(3), (2 * c.y).saturating_sub(3));
+        let (x0, x1) = (wx.max(m), (wx + SIDE).min(w - m));
+        let (y0, y1) = (wy.max(m), (wy + SIDE).min(h - m));
+        if x0 >= x1 || y0 >= y1 {
+            continue;
         }
+        let interior = wx >= r && wx + SIDE + r <= w;
+        for j in 0..span {
+            let row = image.row((wy + j).saturating_sub(r).min(h - 1));
+            // Inside the image the row is read in place (a copy here costs a `memcpy` call per
+            // row); near the border it is padded by clamping.
+            let src = if interior {
+                &row[wx - r..wx + SIDE + r]
+            } else {
+                for (i, p) in s.padded.iter_mut().enumerate() {
+                    *p = row[(wx + i).saturating_sub(r).min(w - 1)];
+                }
+                &s.padded[..]
+            };
+            let o = j * SIDE;
+            horizontal_chunk::<SIDE, FUSED>(
+                k,
+                src,
+                0,
+                &mut s.h0[o..o + SIDE],
+                &mut s.h1[o..o + SIDE],
+                &mut s.h2[o..o + SIDE],
+            );
+        }
+        let mut best: Option<Candidate> = None;
+        for y in y0..y1 {
+            let j = y - wy;
+            vertical_chunk::<SIDE, FUSED>(k, &s, SIDE, &slots[j..j + 2 * r + 1], 0, &mut scores);
+            for x in x0..x1 {
+                let v = scores[x - wx];
+                if v > best.map_or(0.0, |b| b.score) {
+                    best = Some(Candidate { x, y, score: v });
+                }
+            }
+        }
+        out.extend(best);
     }
+    out
 }
 
 /// `image` averaged over `stride × stride` blocks, the incomplete last row and column of blocks
@@ -682,7 +724,7 @@ fn visit_descending(
 /// With [`PrefilterParams::half_resolution`] (the default) and `sigma ≥`
 /// [`MIN_HALF_RESOLUTION_SIGMA`], all of this runs on the image averaged over 2 × 2 blocks at the
 /// equivalent scale, and each candidate is then moved to the best full-resolution pixel within
-/// 2–3 px of its block: positions and scores are full-resolution ones, a quarter of the pixels
+/// 3–4 px of its block: positions and scores are full-resolution ones, a quarter of the pixels
 /// are filtered with kernels half as long. Two candidates may then be closer than `nms_radius`
 /// (they come from different blocks); the election merges such duplicates.
 pub fn prefilter(image: &GrayImage, params: &PrefilterParams) -> Vec<Candidate> {
@@ -702,8 +744,8 @@ pub fn prefilter(image: &GrayImage, params: &PrefilterParams) -> Vec<Candidate> 
 /// factor, the full-resolution score at `σ` sampled at the block centres. The suppression works
 /// on half the distances (radius and margin rounded up) and the cut is the same rule. Each
 /// survivor at half-resolution `(X, Y)` is then placed at the pixel of largest full-resolution
-/// score among `x, y ∈ 2X−2 ..= 2X+3` (the true peak is within a pixel of the block centre
-/// `2X + ½`), inside the margin; candidates landing on the same pixel are merged. Scores are the
+/// score among `x, y ∈ 2X−3 ..= 2X+4` (the true peak is within a pixel or two of the block centre
+/// `2X + ½`), inside the margin ([`relocate`]); candidates landing on the same pixel are merged. Scores are the
 /// full-resolution ones, order is decreasing score (ties: row-major).
 fn prefilter_half_resolution(
     image: &GrayImage,
@@ -717,34 +759,11 @@ fn prefilter_half_resolution(
         nms_tau: params.nms_tau.div_ceil(2),
         ..*params
     };
-    let coarse = select_from_score(&hessian_score(half, sigma_half), &half_params);
-    let k = Kernels::new(sigma);
-    let (w, h, m) = (image.width(), image.height(), params.nms_tau);
-    if w <= 2 * m || h <= 2 * m {
-        return Vec::new();
-    }
-    let mut scratch = Vec::new();
-    let mut window = [0f32; RELOCATE_SIDE * RELOCATE_SIDE];
-    let mut out: Vec<Candidate> = Vec::with_capacity(coarse.len());
-    for c in &coarse {
-        // The window, clipped to the margin.
-        let (x0, y0) = ((2 * c.x).saturating_sub(2).max(m), (2 * c.y).saturating_sub(2).max(m));
-        let (x1, y1) = ((2 * c.x + 4).min(w - m), (2 * c.y + 4).min(h - m));
-        if x0 >= x1 || y0 >= y1 {
-            continue;
-        }
-        score_window(image, &k, (x0, y0), RELOCATE_SIDE, &mut scratch, &mut window);
-        let mut best: Option<Candidate> = None;
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let v = window[(y - y0) * RELOCATE_SIDE + (x - x0)];
-                if v > best.map_or(0.0, |b| b.score) {
-                    best = Some(Candidate { x, y, score: v });
-                }
-            }
-        }
-        out.extend(best);
-    }
+    let mut coarse = select_from_score(&hessian_score(half, sigma_half), &half_params);
+    // Row-major order: the windows of successive candidates then share image rows and pages,
+    // and the result comes out sorted by position for the merge.
+    coarse.sort_unstable_by(|a, b| (a.y, a.x).cmp(&(b.y, b.x)));
+    let mut out = relocate(image, &Kernels::new(sigma), &coarse, params.nms_tau);
     out.sort_unstable_by(|a, b| (a.y, a.x).cmp(&(b.y, b.x)));
     out.dedup_by(|a, b| (a.x, a.y) == (b.x, b.y));
     out.sort_by(|a, b| b.score.total_cmp(&a.score).then((a.y, a.x).cmp(&(b.y, b.x))));
@@ -1134,6 +1153,111 @@ mod tests {
                 .collect();
             let score = GrayImage::from_vec(w, h, data).unwrap();
             assert_matches_reference(&score);
+        }
+    }
+
+    #[test]
+    fn box_downsample_averages_whole_blocks() {
+        let img = GrayImage::from_vec(5, 3, (0..15).map(|v| v as f32).collect()).unwrap();
+        let half = box_downsample(&img, 2).unwrap();
+        assert_eq!((half.width(), half.height()), (2, 1));
+        // Blocks {0, 1, 5, 6} and {2, 3, 7, 8}; the last column and row are dropped.
+        assert_eq!(half.data(), &[3.0, 5.0]);
+        let third = box_downsample(&img, 3).unwrap();
+        assert_eq!(third.data(), &[6.0]);
+        assert_eq!(box_downsample(&img, 1).unwrap(), img);
+        assert!(box_downsample(&img, 0).is_none());
+        assert!(box_downsample(&img, 4).is_none());
+    }
+
+    #[test]
+    fn relocation_picks_the_full_resolution_maximum_of_its_window() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for (seed, sigma) in [(0u64, 2.0f32), (1, 1.5), (2, 3.0)] {
+            let image = board_like(97, 83, seed);
+            let full = hessian_score(&image, sigma);
+            let k = Kernels::new(sigma);
+            // Half-resolution positions everywhere, the borders included.
+            let coarse: Vec<Candidate> = (0..300)
+                .map(|_| Candidate {
+                    x: rng.gen_range(0..48),
+                    y: rng.gen_range(0..41),
+                    score: 1.0,
+                })
+                .collect();
+            for margin in [0, 2, 5] {
+                let got = relocate(&image, &k, &coarse, margin);
+                let want: Vec<Candidate> = coarse
+                    .iter()
+                    .filter_map(|c| {
+                        let (wx, wy) = ((2 * c.x).saturating_sub(3), (2 * c.y).saturating_sub(3));
+                        let mut best: Option<Candidate> = None;
+                        for y in wy.max(margin)..(wy + 8).min(83 - margin) {
+                            for x in wx.max(margin)..(wx + 8).min(97 - margin) {
+                                let v = full.get(x, y);
+                                if v > best.map_or(0.0, |b| b.score) {
+                                    best = Some(Candidate { x, y, score: v });
+                                }
+                            }
+                        }
+                        best
+                    })
+                    .collect();
+                assert_eq!(got, want, "seed {seed} margin {margin}");
+            }
+        }
+    }
+
+    #[test]
+    fn half_resolution_finds_the_corners_of_the_full_resolution_score() {
+        for seed in 0..8 {
+            // Squares of 9 to 20 px: down to 4.5 px at half resolution.
+            let image = board_like(200, 150, 20 + seed);
+            let full_p = PrefilterParams {
+                half_resolution: false,
+                ..Default::default()
+            };
+            let full = prefilter(&image, &full_p);
+            let half = prefilter(&image, &PrefilterParams::default());
+            assert!(half.windows(2).all(|p| p[0].score >= p[1].score));
+            let strong = 0.25 * full[full.len().min(16) / 2].score;
+            for f in full.iter().filter(|f| f.score >= strong) {
+                assert!(
+                    half.iter().any(|h| (h.x, h.y) == (f.x, f.y) && h.score == f.score),
+                    "seed {seed}: {f:?} not found at half resolution"
+                );
+            }
+        }
+        // Below the smallest scale the full-resolution path is taken.
+        let image = board_like(120, 90, 5);
+        let p = PrefilterParams {
+            sigma: 1.0,
+            ..Default::default()
+        };
+        let full = PrefilterParams {
+            half_resolution: false,
+            ..p
+        };
+        assert_eq!(prefilter(&image, &p), prefilter(&image, &full));
+    }
+
+    #[test]
+    fn half_resolution_survives_tiny_images() {
+        for (w, h) in [(1, 1), (2, 2), (3, 3), (2, 50), (50, 2), (9, 4), (17, 17)] {
+            let data = (0..w * h).map(|i| ((i * 7919) % 251) as f32).collect();
+            let image = GrayImage::from_vec(w, h, data).unwrap();
+            for tau in [0, 2, 10] {
+                let p = PrefilterParams {
+                    nms_tau: tau,
+                    min_score_rel: 0.0,
+                    ..Default::default()
+                };
+                for c in prefilter(&image, &p) {
+                    assert!(c.x >= tau && c.y >= tau && c.x + tau < w && c.y + tau < h);
+                    assert!(c.score > 0.0);
+                }
+            }
         }
     }
 
