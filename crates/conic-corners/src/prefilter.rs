@@ -428,24 +428,28 @@ pub fn box_downsample(image: &GrayImage, stride: usize) -> Option<GrayImage> {
     }
     let (w, h) = (image.width() / stride, image.height() / stride);
     let mut out = vec![0f32; w * h];
+    let norm = 1.0 / (stride * stride) as f32;
+    if stride == 2 {
+        // The common case straight from the two rows: no intermediate row to write and re-read.
+        for (y, dst) in out.chunks_exact_mut(w.max(1)).enumerate() {
+            let (a, b) = (image.row(2 * y), image.row(2 * y + 1));
+            for ((d, pa), pb) in dst.iter_mut().zip(a.chunks_exact(2)).zip(b.chunks_exact(2)) {
+                *d = ((pa[0] + pa[1]) + (pb[0] + pb[1])) * norm;
+            }
+        }
+        return GrayImage::from_vec(w, h, out).ok();
+    }
     // Rows are summed element-wise first (vectorizable), then each run of `stride` columns.
     let mut acc = vec![0f32; w * stride];
-    let norm = 1.0 / (stride * stride) as f32;
     for (y, dst) in out.chunks_exact_mut(w.max(1)).enumerate() {
-        acc.copy_from_slice(&image.row(y * stride)[..w * stride]);
-        for r in 1..stride {
+        acc.fill(0.0);
+        for r in 0..stride {
             for (a, &v) in acc.iter_mut().zip(&image.row(y * stride + r)[..w * stride]) {
                 *a += v;
             }
         }
-        if stride == 2 {
-            for (d, pair) in dst.iter_mut().zip(acc.chunks_exact(2)) {
-                *d = (pair[0] + pair[1]) * norm;
-            }
-        } else {
-            for (d, run) in dst.iter_mut().zip(acc.chunks_exact(stride)) {
-                *d = run.iter().sum::<f32>() * norm;
-            }
+        for (d, run) in dst.iter_mut().zip(acc.chunks_exact(stride)) {
+            *d = run.iter().sum::<f32>() * norm;
         }
     }
     GrayImage::from_vec(w, h, out).ok()
@@ -760,13 +764,16 @@ fn prefilter_half_resolution(
         ..*params
     };
     let mut coarse = select_from_score(&hessian_score(half, sigma_half), &half_params);
-    // Row-major order: the windows of successive candidates then share image rows and pages,
-    // and the result comes out sorted by position for the merge.
-    coarse.sort_unstable_by(|a, b| (a.y, a.x).cmp(&(b.y, b.x)));
+    // Row-major order: the windows of successive candidates then share image rows and pages.
+    coarse.sort_unstable_by_key(|c| (c.y, c.x));
     let mut out = relocate(image, &Kernels::new(sigma), &coarse, params.nms_tau);
-    out.sort_unstable_by(|a, b| (a.y, a.x).cmp(&(b.y, b.x)));
+    out.sort_unstable_by_key(|c| (c.y, c.x));
     out.dedup_by(|a, b| (a.x, a.y) == (b.x, b.y));
-    out.sort_by(|a, b| b.score.total_cmp(&a.score).then((a.y, a.x).cmp(&(b.y, b.x))));
+    out.sort_by(|a, b| {
+        b.score
+            .total_cmp(&a.score)
+            .then((a.y, a.x).cmp(&(b.y, b.x)))
+    });
     out
 }
 
@@ -1224,7 +1231,8 @@ mod tests {
             let strong = 0.25 * full[full.len().min(16) / 2].score;
             for f in full.iter().filter(|f| f.score >= strong) {
                 assert!(
-                    half.iter().any(|h| (h.x, h.y) == (f.x, f.y) && h.score == f.score),
+                    half.iter()
+                        .any(|h| (h.x, h.y) == (f.x, f.y) && h.score == f.score),
                     "seed {seed}: {f:?} not found at half resolution"
                 );
             }
