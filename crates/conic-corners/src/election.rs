@@ -8,6 +8,7 @@ use crate::prefilter::{box_downsample, prefilter, Candidate, PrefilterParams};
 use crate::GrayImage;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
 
@@ -414,11 +415,9 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
         .collect();
     // A corner found at both scales keeps its fine position (better than a coarse pixel); the
     // coarse pass only adds the corners the fine one rejected.
-    all.retain(|c| {
-        !fine
-            .iter()
-            .any(|f| (f.x - c.x).hypot(f.y - c.y) < stride as f64 * COARSE_MERGE_PIXELS)
-    });
+    let radius = stride as f64 * COARSE_MERGE_PIXELS;
+    let grid = CornerGrid::new(&fine, radius);
+    all.retain(|c| !grid.any_within(&fine, c.x, c.y, radius));
     all.extend(fine);
     all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.y.total_cmp(&b.y)));
     deduplicate(all, params.min_distance)
@@ -442,21 +441,48 @@ const MAX_STRIDE: usize = 16;
 /// sub-pixel and the corner is a clean X-junction again, while a thin line no longer matches any
 /// template.
 fn coarse_stride(fine: &[Corner]) -> Option<usize> {
+    if fine.len() < 4 {
+        return None;
+    }
     let cos_edge = 15f64.to_radians().cos();
+    // Cells of about one grid step: a board fills its bounding box with one corner per step²
+    // (a single row of corners, one per span / count).
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for c in fine {
+        (lo[0], lo[1]) = (lo[0].min(c.x), lo[1].min(c.y));
+        (hi[0], hi[1]) = (hi[0].max(c.x), hi[1].max(c.y));
+    }
+    let (span_x, span_y) = (hi[0] - lo[0], hi[1] - lo[1]);
+    let n = fine.len() as f64;
+    let cell = ((span_x * span_y) / n)
+        .sqrt()
+        .max(span_x.max(span_y) / n)
+        .max(1.0);
+    let grid = CornerGrid::new(fine, cell);
+    let max_ring = (span_x.max(span_y) / cell).ceil() as i64 + 1;
     let mut steps: Vec<f64> = fine
         .iter()
         .filter_map(|c| {
-            fine.iter()
-                .filter_map(|o| {
+            let dirs = c.angles.map(|a| (a.cos(), a.sin()));
+            let mut best = f64::INFINITY;
+            // Corners in ring k of cells are at least (k − 1)·cell away: once the best so far is
+            // within k·cell, the rings beyond cannot beat it.
+            for k in 0..=max_ring {
+                for o in grid.ring(c.x, c.y, k).map(|i| &fine[i]) {
                     let (dx, dy) = (o.x - c.x, o.y - c.y);
                     let d = dx.hypot(dy);
-                    let along = c
-                        .angles
+                    let along = dirs
                         .iter()
-                        .any(|a| (dx * a.cos() + dy * a.sin()).abs() >= cos_edge * d);
-                    (d > 0.0 && along).then_some(d)
-                })
-                .min_by(f64::total_cmp)
+                        .any(|&(ca, sa)| (dx * ca + dy * sa).abs() >= cos_edge * d);
+                    if d > 0.0 && along && d < best {
+                        best = d;
+                    }
+                }
+                if best <= k as f64 * cell {
+                    break;
+                }
+            }
+            best.is_finite().then_some(best)
         })
         .collect();
     if steps.len() < 4 {
@@ -466,6 +492,54 @@ fn coarse_stride(fine: &[Corner]) -> Option<usize> {
     let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
     let stride = (COARSE_WINDOW_OF_STEP * step / TEMPLATE_SIDE as f64).floor();
     (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
+}
+
+/// Corners binned in square cells of side `cell` (a hash grid), for neighbour queries that look
+/// at a few cells instead of every corner.
+struct CornerGrid {
+    cell: f64,
+    bins: HashMap<(i64, i64), Vec<usize>>,
+}
+
+impl CornerGrid {
+    fn new(corners: &[Corner], cell: f64) -> Self {
+        let mut grid = Self {
+            cell,
+            bins: HashMap::new(),
+        };
+        for (i, c) in corners.iter().enumerate() {
+            let key = grid.key(c.x, c.y);
+            grid.bins.entry(key).or_default().push(i);
+        }
+        grid
+    }
+
+    fn key(&self, x: f64, y: f64) -> (i64, i64) {
+        (
+            (x / self.cell).floor() as i64,
+            (y / self.cell).floor() as i64,
+        )
+    }
+
+    /// Indices of the corners in the cells at Chebyshev distance exactly `k` from the cell of
+    /// `(x, y)`.
+    fn ring(&self, x: f64, y: f64, k: i64) -> impl Iterator<Item = usize> + '_ {
+        let (cx, cy) = self.key(x, y);
+        (-k..=k)
+            .flat_map(move |dy| (-k..=k).map(move |dx| (dx, dy)))
+            .filter(move |&(dx, dy)| dx.abs().max(dy.abs()) == k)
+            .filter_map(move |(dx, dy)| self.bins.get(&(cx + dx, cy + dy)))
+            .flatten()
+            .copied()
+    }
+
+    /// Whether some corner of `corners` (the ones binned) lies closer than `radius ≤ cell` to
+    /// `(x, y)`.
+    fn any_within(&self, corners: &[Corner], x: f64, y: f64, radius: f64) -> bool {
+        (0..=1)
+            .flat_map(|k| self.ring(x, y, k))
+            .any(|i| (corners[i].x - x).hypot(corners[i].y - y) < radius)
+    }
 }
 
 /// Subpixel saddle point near pixel `(x, y)`: the stationary point of the quadratic surface fitted
@@ -545,7 +619,7 @@ fn deduplicate(sorted: Vec<Corner>, radius: f64) -> Vec<Corner> {
         return sorted;
     }
     let cell = |v: f64| (v / radius).floor() as i64;
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    let mut grid: HashMap<(i64, i64), Vec<usize>> = Default::default();
     let mut kept: Vec<Corner> = Vec::with_capacity(sorted.len());
     for c in sorted {
         let (cx, cy) = (cell(c.x), cell(c.y));
@@ -882,6 +956,78 @@ mod tests {
         assert!(got[0].score > 0.9, "{:?}", got[0]);
         assert!(angle_diff(got[0].angles[0], t1) < 0.07, "{:?}", got[0]);
         assert!(angle_diff(got[0].angles[1], t2) < 0.07, "{:?}", got[0]);
+    }
+
+    /// [`coarse_stride`] by its definition, every pair of corners compared.
+    fn reference_stride(fine: &[Corner]) -> Option<usize> {
+        let cos_edge = 15f64.to_radians().cos();
+        let mut steps: Vec<f64> = fine
+            .iter()
+            .filter_map(|c| {
+                fine.iter()
+                    .filter_map(|o| {
+                        let (dx, dy) = (o.x - c.x, o.y - c.y);
+                        let d = dx.hypot(dy);
+                        let along = c
+                            .angles
+                            .iter()
+                            .any(|a| (dx * a.cos() + dy * a.sin()).abs() >= cos_edge * d);
+                        (d > 0.0 && along).then_some(d)
+                    })
+                    .min_by(f64::total_cmp)
+            })
+            .collect();
+        if steps.len() < 4 {
+            return None;
+        }
+        let mid = steps.len() / 2;
+        let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let stride = (COARSE_WINDOW_OF_STEP * step / TEMPLATE_SIDE as f64).floor();
+        (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
+    }
+
+    #[test]
+    fn coarse_stride_follows_its_definition() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let corner = |x: f64, y: f64, a: f64| Corner {
+            x,
+            y,
+            angles: wrap_pair([a, a + 0.5 * PI]),
+            score: 0.9,
+        };
+        for _ in 0..30 {
+            // A rotated grid with a random step, holes, jitter and a few strays.
+            let (step, rot) = (rng.gen_range(8.0..120.0), rng.gen_range(0.0..PI));
+            let (c, s) = (f64::cos(rot), f64::sin(rot));
+            let mut fine: Vec<Corner> = (0..rng.gen_range(0..15))
+                .flat_map(|i| (0..12).map(move |j| (i as f64, j as f64)))
+                .filter(|_| rng.gen_bool(0.8))
+                .map(|(i, j)| {
+                    let (u, v) = (i * step, j * step);
+                    corner(500.0 + c * u - s * v, 400.0 + s * u + c * v, rot)
+                })
+                .collect();
+            for _ in 0..rng.gen_range(0..5) {
+                let a = rng.gen_range(0.0..PI);
+                fine.push(corner(
+                    rng.gen_range(0.0..2000.0),
+                    rng.gen_range(0.0..2000.0),
+                    a,
+                ));
+            }
+            assert_eq!(
+                coarse_stride(&fine),
+                reference_stride(&fine),
+                "{step} {rot}"
+            );
+        }
+        // One row of corners, and all at one point: no panic, same answer.
+        let row: Vec<Corner> = (0..50).map(|i| corner(i as f64 * 60.0, 5.0, 0.0)).collect();
+        assert_eq!(coarse_stride(&row), reference_stride(&row));
+        assert_eq!(coarse_stride(&row), Some(3));
+        let point = vec![corner(3.0, 3.0, 0.2); 6];
+        assert_eq!(coarse_stride(&point), None);
     }
 
     #[test]
