@@ -1,6 +1,7 @@
 //! Final election (paper III-B): the two edge orientations of a candidate from a quadratic surface
-//! fit (eq. 3–4), the matching template from a bank built once, and the NCC score (eq. 5); plus
-//! [`find_corners`], the whole pixel-level detector (pre-filter then election).
+//! fit (eq. 3–4), the matching template from a bank (each entry built on first use), and the NCC
+//! score (eq. 5); plus [`find_corners`], the whole pixel-level detector (pre-filter then
+//! election).
 //!
 //! Positions are image coordinates (x right, y down, pixel centres at integers).
 
@@ -33,33 +34,31 @@ pub const MAX_SURFACE_HALF: usize = 32;
 /// coefficients (α, β, γ, δ, ε) of `αx² + βxy + γy² + δx + εy + ζ`. The design matrix depends only on the
 /// window, so the fit is a few dot products per call.
 fn surface_projector(half: usize) -> &'static [Vec<f64>; 5] {
-    static CACHE: OnceLock<Vec<[Vec<f64>; 5]>> = OnceLock::new();
-    let all = CACHE.get_or_init(|| {
-        (0..=MAX_SURFACE_HALF)
-            .map(|h| {
-                let side = 2 * h + 1;
-                let n = side * side;
-                let mut a = DMatrix::<f64>::zeros(n, 6);
-                for (i, (dy, dx)) in (0..side)
-                    .flat_map(|r| (0..side).map(move |c| (r, c)))
-                    .enumerate()
-                {
-                    let (x, y) = (dx as f64 - h as f64, dy as f64 - h as f64);
-                    let row = [x * x, x * y, y * y, x, y, 1.0];
-                    for (j, v) in row.iter().enumerate() {
-                        a[(i, j)] = *v;
-                    }
-                }
-                let ata = a.transpose() * &a;
-                let proj = ata
-                    .try_inverse()
-                    .map(|inv| inv * a.transpose())
-                    .unwrap_or_else(|| DMatrix::zeros(6, n));
-                [0, 1, 2, 3, 4].map(|k| proj.row(k).iter().copied().collect())
-            })
-            .collect()
-    });
-    &all[half]
+    // One lazily built entry per size: a process that only uses the default window builds one.
+    static CACHE: [OnceLock<[Vec<f64>; 5]>; MAX_SURFACE_HALF + 1] =
+        [const { OnceLock::new() }; MAX_SURFACE_HALF + 1];
+    CACHE[half].get_or_init(|| {
+        let h = half;
+        let side = 2 * h + 1;
+        let n = side * side;
+        let mut a = DMatrix::<f64>::zeros(n, 6);
+        for (i, (dy, dx)) in (0..side)
+            .flat_map(|r| (0..side).map(move |c| (r, c)))
+            .enumerate()
+        {
+            let (x, y) = (dx as f64 - h as f64, dy as f64 - h as f64);
+            let row = [x * x, x * y, y * y, x, y, 1.0];
+            for (j, v) in row.iter().enumerate() {
+                a[(i, j)] = *v;
+            }
+        }
+        let ata = a.transpose() * &a;
+        let proj = ata
+            .try_inverse()
+            .map(|inv| inv * a.transpose())
+            .unwrap_or_else(|| DMatrix::zeros(6, n));
+        [0, 1, 2, 3, 4].map(|k| proj.row(k).iter().copied().collect())
+    })
 }
 
 /// Orientations `[θ₁, θ₂]` (radians in `[0, π)`) of the two edges of a saddle at `(x, y)`.
@@ -135,29 +134,27 @@ const CONTRAST_REFERENCE_COUNT: usize = 16;
 /// is 5° on either angle; the fit can be ~25° off on oblique corners (see the tests).
 const MAX_CLIMB: usize = 8;
 
-/// Zero-mean, unit-norm 15 × 15 templates, row-major, `bank[e · 36 + d]` for edge-angle bin `e`
-/// and direction bin `d` (see [`template_angles`]).
-fn template_bank() -> &'static [[f32; TEMPLATE_LEN]] {
-    static BANK: OnceLock<Vec<[f32; TEMPLATE_LEN]>> = OnceLock::new();
-    BANK.get_or_init(|| {
-        let mut bank = Vec::with_capacity(TEMPLATE_STEPS * TEMPLATE_STEPS);
-        for e in 0..TEMPLATE_STEPS {
-            for d in 0..TEMPLATE_STEPS {
-                let [t1, t2] = template_angles(e, d);
-                let mut t = [0f64; TEMPLATE_LEN];
-                for (i, v) in t.iter_mut().enumerate() {
-                    let x = (i % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
-                    let y = (i / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
-                    let d1 = x * t1.sin() - y * t1.cos();
-                    let d2 = x * t2.sin() - y * t2.cos();
-                    *v = (d1 / EDGE_SOFTNESS).tanh() * (d2 / EDGE_SOFTNESS).tanh();
-                }
-                let mean = t.iter().sum::<f64>() / TEMPLATE_LEN as f64;
-                let norm = t.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
-                bank.push(t.map(|v| ((v - mean) / norm) as f32));
-            }
+/// Zero-mean, unit-norm 15 × 15 template of bank entry `(e, d)` (edge-angle bin `e`, direction
+/// bin `d`, see [`template_angles`]), row-major: the product of two soft steps across its edges.
+/// Entries are built on first use: a board only ever needs the few around its own corner angles,
+/// and building all 1296 costs several milliseconds per process.
+fn template(e: usize, d: usize) -> &'static [f32; TEMPLATE_LEN] {
+    static BANK: [OnceLock<[f32; TEMPLATE_LEN]>; TEMPLATE_STEPS * TEMPLATE_STEPS] =
+        [const { OnceLock::new() }; TEMPLATE_STEPS * TEMPLATE_STEPS];
+    BANK[e * TEMPLATE_STEPS + d].get_or_init(|| {
+        let [t1, t2] = template_angles(e, d);
+        let ((s1, c1), (s2, c2)) = (t1.sin_cos(), t2.sin_cos());
+        let mut t = [0f64; TEMPLATE_LEN];
+        for (i, v) in t.iter_mut().enumerate() {
+            let x = (i % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+            let y = (i / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+            let d1 = x * s1 - y * c1;
+            let d2 = x * s2 - y * c2;
+            *v = (d1 / EDGE_SOFTNESS).tanh() * (d2 / EDGE_SOFTNESS).tanh();
         }
-        bank
+        let mean = t.iter().sum::<f64>() / TEMPLATE_LEN as f64;
+        let norm = t.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+        t.map(|v| ((v - mean) / norm) as f32)
     })
 }
 
@@ -231,7 +228,7 @@ fn dot(a: &[f32; TEMPLATE_LEN], b: &[f32; TEMPLATE_LEN]) -> f32 {
 /// `|NCC|` (eq. 5) of a centred patch with bank entry `(e, d)`; the sign only tells which pair of
 /// opposite sectors is bright, and checkerboards have both kinds of corner.
 fn ncc(patch: &[f32; TEMPLATE_LEN], norm: f32, e: usize, d: usize) -> f32 {
-    let t = &template_bank()[e * TEMPLATE_STEPS + d];
+    let t = template(e, d);
     (dot(patch, t) / norm).abs()
 }
 
@@ -355,7 +352,7 @@ fn score_candidate(
 /// line or a stroke, which a narrow-wedge template also matches, has its darkest (or brightest)
 /// pixels right at the centre, a residual near half the contrast.
 fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel: f64) -> bool {
-    let t = &template_bank()[e * TEMPLATE_STEPS + d];
+    let t = template(e, d);
     let b = dot(patch, t);
     let (lo, hi) = t
         .iter()
@@ -718,9 +715,10 @@ mod tests {
                 }
             }
         }
-        let bank = template_bank();
-        assert_eq!(bank.len(), TEMPLATE_STEPS * TEMPLATE_STEPS);
-        for t in bank.iter().step_by(97) {
+        for t in (0..TEMPLATE_STEPS * TEMPLATE_STEPS)
+            .step_by(97)
+            .map(|i| template(i / TEMPLATE_STEPS, i % TEMPLATE_STEPS))
+        {
             assert!(t.iter().sum::<f32>().abs() < 1e-4);
             assert!((t.iter().map(|v| v * v).sum::<f32>() - 1.0).abs() < 1e-4);
         }
