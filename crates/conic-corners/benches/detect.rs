@@ -12,13 +12,13 @@
 //! Every case runs inside a one-thread rayon pool, so the numbers are single-core whatever
 //! `RAYON_NUM_THREADS` says. Target (issue "Board detection", item 8): ≤ 15 ms on `board`.
 //!
-//! The `stages` group splits the pre-filter of `board` (the Hessian score and the non-maximum
-//! suppression, which `detect`'s stage timings lump together) and times the election on its
+//! The `stages` group times the pre-filter of `board` (default: at half resolution; and the
+//! full-resolution path with its Hessian score alone, for comparison) and the election on its
 //! candidates: `cargo bench -p conic-corners --bench detect -- stages`.
 
 use conic_corners::detect::{detect, DetectParams};
 use conic_corners::election::elect;
-use conic_corners::prefilter::{hessian_score, non_maximum_suppression, prefilter};
+use conic_corners::prefilter::{hessian_score, prefilter, PrefilterParams};
 use conic_corners::synth::{speed_benchmark_scene, SPEED_BENCHMARK_NOISE_SEED};
 use conic_corners::GrayImage;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
@@ -78,24 +78,24 @@ fn bench_stages(c: &mut Criterion) {
         .expect("one-thread pool");
     let image = board_image();
     let p = DetectParams::default();
-    let score = hessian_score(&image, p.prefilter.sigma);
+    let full_resolution = PrefilterParams {
+        half_resolution: false,
+        ..p.prefilter
+    };
     let candidates = prefilter(&image, &p.prefilter);
     let mut group = c.benchmark_group("stages");
     group
         .sample_size(10)
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(3));
+    group.bench_function("prefilter", |b| {
+        b.iter(|| pool.install(|| prefilter(black_box(&image), &p.prefilter)))
+    });
+    group.bench_function("prefilter_full_resolution", |b| {
+        b.iter(|| pool.install(|| prefilter(black_box(&image), &full_resolution)))
+    });
     group.bench_function("hessian_score", |b| {
         b.iter(|| pool.install(|| hessian_score(black_box(&image), p.prefilter.sigma)))
-    });
-    group.bench_function("nms", |b| {
-        b.iter(|| {
-            non_maximum_suppression(
-                black_box(&score),
-                p.prefilter.nms_radius,
-                p.prefilter.nms_tau,
-            )
-        })
     });
     group.bench_function(format!("elect_{}_candidates", candidates.len()), |b| {
         b.iter(|| pool.install(|| elect(black_box(&image), &candidates, &p.election)))

@@ -1,13 +1,15 @@
 //! Final election (paper III-B): the two edge orientations of a candidate from a quadratic surface
-//! fit (eq. 3–4), the matching template from a bank built once, and the NCC score (eq. 5); plus
-//! [`find_corners`], the whole pixel-level detector (pre-filter then election).
+//! fit (eq. 3–4), the matching template from a bank (each entry built on first use), and the NCC
+//! score (eq. 5); plus [`find_corners`], the whole pixel-level detector (pre-filter then
+//! election).
 //!
 //! Positions are image coordinates (x right, y down, pixel centres at integers).
 
-use crate::prefilter::{prefilter, Candidate, PrefilterParams};
+use crate::prefilter::{box_downsample, prefilter, Candidate, PrefilterParams};
 use crate::GrayImage;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
 
@@ -32,33 +34,31 @@ pub const MAX_SURFACE_HALF: usize = 32;
 /// coefficients (α, β, γ, δ, ε) of `αx² + βxy + γy² + δx + εy + ζ`. The design matrix depends only on the
 /// window, so the fit is a few dot products per call.
 fn surface_projector(half: usize) -> &'static [Vec<f64>; 5] {
-    static CACHE: OnceLock<Vec<[Vec<f64>; 5]>> = OnceLock::new();
-    let all = CACHE.get_or_init(|| {
-        (0..=MAX_SURFACE_HALF)
-            .map(|h| {
-                let side = 2 * h + 1;
-                let n = side * side;
-                let mut a = DMatrix::<f64>::zeros(n, 6);
-                for (i, (dy, dx)) in (0..side)
-                    .flat_map(|r| (0..side).map(move |c| (r, c)))
-                    .enumerate()
-                {
-                    let (x, y) = (dx as f64 - h as f64, dy as f64 - h as f64);
-                    let row = [x * x, x * y, y * y, x, y, 1.0];
-                    for (j, v) in row.iter().enumerate() {
-                        a[(i, j)] = *v;
-                    }
-                }
-                let ata = a.transpose() * &a;
-                let proj = ata
-                    .try_inverse()
-                    .map(|inv| inv * a.transpose())
-                    .unwrap_or_else(|| DMatrix::zeros(6, n));
-                [0, 1, 2, 3, 4].map(|k| proj.row(k).iter().copied().collect())
-            })
-            .collect()
-    });
-    &all[half]
+    // One lazily built entry per size: a process that only uses the default window builds one.
+    static CACHE: [OnceLock<[Vec<f64>; 5]>; MAX_SURFACE_HALF + 1] =
+        [const { OnceLock::new() }; MAX_SURFACE_HALF + 1];
+    CACHE[half].get_or_init(|| {
+        let h = half;
+        let side = 2 * h + 1;
+        let n = side * side;
+        let mut a = DMatrix::<f64>::zeros(n, 6);
+        for (i, (dy, dx)) in (0..side)
+            .flat_map(|r| (0..side).map(move |c| (r, c)))
+            .enumerate()
+        {
+            let (x, y) = (dx as f64 - h as f64, dy as f64 - h as f64);
+            let row = [x * x, x * y, y * y, x, y, 1.0];
+            for (j, v) in row.iter().enumerate() {
+                a[(i, j)] = *v;
+            }
+        }
+        let ata = a.transpose() * &a;
+        let proj = ata
+            .try_inverse()
+            .map(|inv| inv * a.transpose())
+            .unwrap_or_else(|| DMatrix::zeros(6, n));
+        [0, 1, 2, 3, 4].map(|k| proj.row(k).iter().copied().collect())
+    })
 }
 
 /// Orientations `[θ₁, θ₂]` (radians in `[0, π)`) of the two edges of a saddle at `(x, y)`.
@@ -134,29 +134,27 @@ const CONTRAST_REFERENCE_COUNT: usize = 16;
 /// is 5° on either angle; the fit can be ~25° off on oblique corners (see the tests).
 const MAX_CLIMB: usize = 8;
 
-/// Zero-mean, unit-norm 15 × 15 templates, row-major, `bank[e · 36 + d]` for edge-angle bin `e`
-/// and direction bin `d` (see [`template_angles`]).
-fn template_bank() -> &'static [[f32; TEMPLATE_LEN]] {
-    static BANK: OnceLock<Vec<[f32; TEMPLATE_LEN]>> = OnceLock::new();
-    BANK.get_or_init(|| {
-        let mut bank = Vec::with_capacity(TEMPLATE_STEPS * TEMPLATE_STEPS);
-        for e in 0..TEMPLATE_STEPS {
-            for d in 0..TEMPLATE_STEPS {
-                let [t1, t2] = template_angles(e, d);
-                let mut t = [0f64; TEMPLATE_LEN];
-                for (i, v) in t.iter_mut().enumerate() {
-                    let x = (i % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
-                    let y = (i / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
-                    let d1 = x * t1.sin() - y * t1.cos();
-                    let d2 = x * t2.sin() - y * t2.cos();
-                    *v = (d1 / EDGE_SOFTNESS).tanh() * (d2 / EDGE_SOFTNESS).tanh();
-                }
-                let mean = t.iter().sum::<f64>() / TEMPLATE_LEN as f64;
-                let norm = t.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
-                bank.push(t.map(|v| ((v - mean) / norm) as f32));
-            }
+/// Zero-mean, unit-norm 15 × 15 template of bank entry `(e, d)` (edge-angle bin `e`, direction
+/// bin `d`, see [`template_angles`]), row-major: the product of two soft steps across its edges.
+/// Entries are built on first use: a board only ever needs the few around its own corner angles,
+/// and building all 1296 costs several milliseconds per process.
+fn template(e: usize, d: usize) -> &'static [f32; TEMPLATE_LEN] {
+    static BANK: [OnceLock<[f32; TEMPLATE_LEN]>; TEMPLATE_STEPS * TEMPLATE_STEPS] =
+        [const { OnceLock::new() }; TEMPLATE_STEPS * TEMPLATE_STEPS];
+    BANK[e * TEMPLATE_STEPS + d].get_or_init(|| {
+        let [t1, t2] = template_angles(e, d);
+        let ((s1, c1), (s2, c2)) = (t1.sin_cos(), t2.sin_cos());
+        let mut t = [0f64; TEMPLATE_LEN];
+        for (i, v) in t.iter_mut().enumerate() {
+            let x = (i % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+            let y = (i / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+            let d1 = x * s1 - y * c1;
+            let d2 = x * s2 - y * c2;
+            *v = (d1 / EDGE_SOFTNESS).tanh() * (d2 / EDGE_SOFTNESS).tanh();
         }
-        bank
+        let mean = t.iter().sum::<f64>() / TEMPLATE_LEN as f64;
+        let norm = t.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+        t.map(|v| ((v - mean) / norm) as f32)
     })
 }
 
@@ -211,12 +209,27 @@ fn centred_patch(image: &GrayImage, x: usize, y: usize) -> Option<([f32; TEMPLAT
     (norm > 1e-4 * (1.0 + mean.abs()) * TEMPLATE_SIDE as f32).then_some((p, norm))
 }
 
+/// `Σ a[i]·b[i]` over a patch, in 8 interleaved partial sums: a sequential `f32` sum cannot be
+/// vectorized (its rounding order is fixed), this one becomes a few vector multiply-adds.
+#[inline(always)]
+fn dot(a: &[f32; TEMPLATE_LEN], b: &[f32; TEMPLATE_LEN]) -> f32 {
+    const L: usize = 8;
+    let mut acc = [0f32; L];
+    for (ca, cb) in a.chunks_exact(L).zip(b.chunks_exact(L)) {
+        for i in 0..L {
+            acc[i] += ca[i] * cb[i];
+        }
+    }
+    let tail = TEMPLATE_LEN - TEMPLATE_LEN % L;
+    let rest: f32 = (tail..TEMPLATE_LEN).map(|i| a[i] * b[i]).sum();
+    acc.iter().sum::<f32>() + rest
+}
+
 /// `|NCC|` (eq. 5) of a centred patch with bank entry `(e, d)`; the sign only tells which pair of
 /// opposite sectors is bright, and checkerboards have both kinds of corner.
 fn ncc(patch: &[f32; TEMPLATE_LEN], norm: f32, e: usize, d: usize) -> f32 {
-    let t = &template_bank()[e * TEMPLATE_STEPS + d];
-    let dot: f32 = patch.iter().zip(t).map(|(a, b)| a * b).sum();
-    (dot / norm).abs()
+    let t = template(e, d);
+    (dot(patch, t) / norm).abs()
 }
 
 /// Parameters of [`elect`].
@@ -318,10 +331,9 @@ fn score_candidate(
         }
     }
     // NCC of the patch with itself rotated by 180° about the candidate (same pixels, same mean).
-    let symmetry = (0..TEMPLATE_LEN)
-        .map(|i| patch[i] * patch[TEMPLATE_LEN - 1 - i])
-        .sum::<f32>()
-        / (norm * norm);
+    let mut rotated = patch;
+    rotated.reverse();
+    let symmetry = dot(&patch, &rotated) / (norm * norm);
     let symmetric = symmetry as f64 >= params.min_symmetry;
     // The amplitude of the corner: the least-squares gain of the unit-norm template.
     let amplitude = best * norm;
@@ -340,8 +352,8 @@ fn score_candidate(
 /// line or a stroke, which a narrow-wedge template also matches, has its darkest (or brightest)
 /// pixels right at the centre, a residual near half the contrast.
 fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel: f64) -> bool {
-    let t = &template_bank()[e * TEMPLATE_STEPS + d];
-    let b: f32 = patch.iter().zip(t).map(|(a, b)| a * b).sum();
+    let t = template(e, d);
+    let b = dot(patch, t);
     let (lo, hi) = t
         .iter()
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
@@ -380,7 +392,8 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     let Some(stride) = coarse_stride(&fine) else {
         return fine;
     };
-    let Some(coarse) = downsample(image, stride) else {
+    let Some(coarse) = box_downsample(image, stride).filter(|c| c.width().min(c.height()) >= 16)
+    else {
         return fine;
     };
     let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
@@ -399,11 +412,9 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
         .collect();
     // A corner found at both scales keeps its fine position (better than a coarse pixel); the
     // coarse pass only adds the corners the fine one rejected.
-    all.retain(|c| {
-        !fine
-            .iter()
-            .any(|f| (f.x - c.x).hypot(f.y - c.y) < stride as f64 * COARSE_MERGE_PIXELS)
-    });
+    let radius = stride as f64 * COARSE_MERGE_PIXELS;
+    let grid = CornerGrid::new(&fine, radius);
+    all.retain(|c| !grid.any_within(&fine, c.x, c.y, radius));
     all.extend(fine);
     all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.y.total_cmp(&b.y)));
     deduplicate(all, params.min_distance)
@@ -427,21 +438,48 @@ const MAX_STRIDE: usize = 16;
 /// sub-pixel and the corner is a clean X-junction again, while a thin line no longer matches any
 /// template.
 fn coarse_stride(fine: &[Corner]) -> Option<usize> {
+    if fine.len() < 4 {
+        return None;
+    }
     let cos_edge = 15f64.to_radians().cos();
+    // Cells of about one grid step: a board fills its bounding box with one corner per step²
+    // (a single row of corners, one per span / count).
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for c in fine {
+        (lo[0], lo[1]) = (lo[0].min(c.x), lo[1].min(c.y));
+        (hi[0], hi[1]) = (hi[0].max(c.x), hi[1].max(c.y));
+    }
+    let (span_x, span_y) = (hi[0] - lo[0], hi[1] - lo[1]);
+    let n = fine.len() as f64;
+    let cell = ((span_x * span_y) / n)
+        .sqrt()
+        .max(span_x.max(span_y) / n)
+        .max(1.0);
+    let grid = CornerGrid::new(fine, cell);
+    let max_ring = (span_x.max(span_y) / cell).ceil() as i64 + 1;
     let mut steps: Vec<f64> = fine
         .iter()
         .filter_map(|c| {
-            fine.iter()
-                .filter_map(|o| {
+            let dirs = c.angles.map(|a| (a.cos(), a.sin()));
+            let mut best = f64::INFINITY;
+            // Corners in ring k of cells are at least (k − 1)·cell away: once the best so far is
+            // within k·cell, the rings beyond cannot beat it.
+            for k in 0..=max_ring {
+                for o in grid.ring(c.x, c.y, k).map(|i| &fine[i]) {
                     let (dx, dy) = (o.x - c.x, o.y - c.y);
                     let d = dx.hypot(dy);
-                    let along = c
-                        .angles
+                    let along = dirs
                         .iter()
-                        .any(|a| (dx * a.cos() + dy * a.sin()).abs() >= cos_edge * d);
-                    (d > 0.0 && along).then_some(d)
-                })
-                .min_by(f64::total_cmp)
+                        .any(|&(ca, sa)| (dx * ca + dy * sa).abs() >= cos_edge * d);
+                    if d > 0.0 && along && d < best {
+                        best = d;
+                    }
+                }
+                if best <= k as f64 * cell {
+                    break;
+                }
+            }
+            best.is_finite().then_some(best)
         })
         .collect();
     if steps.len() < 4 {
@@ -453,28 +491,52 @@ fn coarse_stride(fine: &[Corner]) -> Option<usize> {
     (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
 }
 
-/// `image` averaged over `stride × stride` blocks (the incomplete last row and column of blocks
-/// dropped): coarse pixel `(X, Y)` has its centre at full-resolution `(sX + (s−1)/2, sY + (s−1)/2)`.
-/// `None` if fewer than 16 × 16 coarse pixels remain.
-fn downsample(image: &GrayImage, stride: usize) -> Option<GrayImage> {
-    let (w, h) = (image.width() / stride, image.height() / stride);
-    if w < 16 || h < 16 {
-        return None;
-    }
-    let mut out = vec![0f32; w * h];
-    let norm = 1.0 / (stride * stride) as f32;
-    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
-        for r in 0..stride {
-            let row = image.row(y * stride + r);
-            for (x, d) in dst.iter_mut().enumerate() {
-                *d += row[x * stride..(x + 1) * stride].iter().sum::<f32>();
-            }
+/// Corners binned in square cells of side `cell` (a hash grid), for neighbour queries that look
+/// at a few cells instead of every corner.
+struct CornerGrid {
+    cell: f64,
+    bins: HashMap<(i64, i64), Vec<usize>>,
+}
+
+impl CornerGrid {
+    fn new(corners: &[Corner], cell: f64) -> Self {
+        let mut grid = Self {
+            cell,
+            bins: HashMap::new(),
+        };
+        for (i, c) in corners.iter().enumerate() {
+            let key = grid.key(c.x, c.y);
+            grid.bins.entry(key).or_default().push(i);
         }
-        for d in dst.iter_mut() {
-            *d *= norm;
-        }
+        grid
     }
-    GrayImage::from_vec(w, h, out).ok()
+
+    fn key(&self, x: f64, y: f64) -> (i64, i64) {
+        (
+            (x / self.cell).floor() as i64,
+            (y / self.cell).floor() as i64,
+        )
+    }
+
+    /// Indices of the corners in the cells at Chebyshev distance exactly `k` from the cell of
+    /// `(x, y)`.
+    fn ring(&self, x: f64, y: f64, k: i64) -> impl Iterator<Item = usize> + '_ {
+        let (cx, cy) = self.key(x, y);
+        (-k..=k)
+            .flat_map(move |dy| (-k..=k).map(move |dx| (dx, dy)))
+            .filter(move |&(dx, dy)| dx.abs().max(dy.abs()) == k)
+            .filter_map(move |(dx, dy)| self.bins.get(&(cx + dx, cy + dy)))
+            .flatten()
+            .copied()
+    }
+
+    /// Whether some corner of `corners` (the ones binned) lies closer than `radius ≤ cell` to
+    /// `(x, y)`.
+    fn any_within(&self, corners: &[Corner], x: f64, y: f64, radius: f64) -> bool {
+        (0..=1)
+            .flat_map(|k| self.ring(x, y, k))
+            .any(|i| (corners[i].x - x).hypot(corners[i].y - y) < radius)
+    }
 }
 
 /// Subpixel saddle point near pixel `(x, y)`: the stationary point of the quadratic surface fitted
@@ -554,7 +616,7 @@ fn deduplicate(sorted: Vec<Corner>, radius: f64) -> Vec<Corner> {
         return sorted;
     }
     let cell = |v: f64| (v / radius).floor() as i64;
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    let mut grid: HashMap<(i64, i64), Vec<usize>> = Default::default();
     let mut kept: Vec<Corner> = Vec::with_capacity(sorted.len());
     for c in sorted {
         let (cx, cy) = (cell(c.x), cell(c.y));
@@ -653,9 +715,10 @@ mod tests {
                 }
             }
         }
-        let bank = template_bank();
-        assert_eq!(bank.len(), TEMPLATE_STEPS * TEMPLATE_STEPS);
-        for t in bank.iter().step_by(97) {
+        for t in (0..TEMPLATE_STEPS * TEMPLATE_STEPS)
+            .step_by(97)
+            .map(|i| template(i / TEMPLATE_STEPS, i % TEMPLATE_STEPS))
+        {
             assert!(t.iter().sum::<f32>().abs() < 1e-4);
             assert!((t.iter().map(|v| v * v).sum::<f32>() - 1.0).abs() < 1e-4);
         }
@@ -891,6 +954,78 @@ mod tests {
         assert!(got[0].score > 0.9, "{:?}", got[0]);
         assert!(angle_diff(got[0].angles[0], t1) < 0.07, "{:?}", got[0]);
         assert!(angle_diff(got[0].angles[1], t2) < 0.07, "{:?}", got[0]);
+    }
+
+    /// [`coarse_stride`] by its definition, every pair of corners compared.
+    fn reference_stride(fine: &[Corner]) -> Option<usize> {
+        let cos_edge = 15f64.to_radians().cos();
+        let mut steps: Vec<f64> = fine
+            .iter()
+            .filter_map(|c| {
+                fine.iter()
+                    .filter_map(|o| {
+                        let (dx, dy) = (o.x - c.x, o.y - c.y);
+                        let d = dx.hypot(dy);
+                        let along = c
+                            .angles
+                            .iter()
+                            .any(|a| (dx * a.cos() + dy * a.sin()).abs() >= cos_edge * d);
+                        (d > 0.0 && along).then_some(d)
+                    })
+                    .min_by(f64::total_cmp)
+            })
+            .collect();
+        if steps.len() < 4 {
+            return None;
+        }
+        let mid = steps.len() / 2;
+        let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let stride = (COARSE_WINDOW_OF_STEP * step / TEMPLATE_SIDE as f64).floor();
+        (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
+    }
+
+    #[test]
+    fn coarse_stride_follows_its_definition() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let corner = |x: f64, y: f64, a: f64| Corner {
+            x,
+            y,
+            angles: wrap_pair([a, a + 0.5 * PI]),
+            score: 0.9,
+        };
+        for _ in 0..30 {
+            // A rotated grid with a random step, holes, jitter and a few strays.
+            let (step, rot) = (rng.gen_range(8.0..120.0), rng.gen_range(0.0..PI));
+            let (c, s) = (f64::cos(rot), f64::sin(rot));
+            let mut fine: Vec<Corner> = (0..rng.gen_range(0..15))
+                .flat_map(|i| (0..12).map(move |j| (i as f64, j as f64)))
+                .filter(|_| rng.gen_bool(0.8))
+                .map(|(i, j)| {
+                    let (u, v) = (i * step, j * step);
+                    corner(500.0 + c * u - s * v, 400.0 + s * u + c * v, rot)
+                })
+                .collect();
+            for _ in 0..rng.gen_range(0..5) {
+                let a = rng.gen_range(0.0..PI);
+                fine.push(corner(
+                    rng.gen_range(0.0..2000.0),
+                    rng.gen_range(0.0..2000.0),
+                    a,
+                ));
+            }
+            assert_eq!(
+                coarse_stride(&fine),
+                reference_stride(&fine),
+                "{step} {rot}"
+            );
+        }
+        // One row of corners, and all at one point: no panic, same answer.
+        let row: Vec<Corner> = (0..50).map(|i| corner(i as f64 * 60.0, 5.0, 0.0)).collect();
+        assert_eq!(coarse_stride(&row), reference_stride(&row));
+        assert_eq!(coarse_stride(&row), Some(3));
+        let point = vec![corner(3.0, 3.0, 0.2); 6];
+        assert_eq!(coarse_stride(&point), None);
     }
 
     #[test]
