@@ -2,6 +2,7 @@
 """Tables of the curved-board benchmark (paper Table I and experiment IV-B).
 
 Usage: board_report.py DIR [--markdown] [--match-px 2]
+       board_report.py DIR --selftest   (triangulates the exact truth: errors must vanish)
 
 Reads DIR/truth.jsonl and DIR/ours.jsonl (board-accuracy), DIR/peers.jsonl (board_peers.py; may be
 missing). Every method is matched by position, the same way: each visible true corner of a view takes
@@ -311,14 +312,42 @@ def render(tabs, markdown):
     return "\n".join(lines)
 
 
+def selftest(root):
+    """Triangulating every pair's exact corners must give the exact 3-D corners back."""
+    worst_px = worst_mm = 0.0
+    n = 0
+    for t in read_jsonl(os.path.join(root, "truth.jsonl")):
+        views = t["views"]
+        both = [(cl, cr) for cl, cr in zip(views["L"]["corners"], views["R"]["corners"])
+                if cl["visible"] and cr["visible"]]
+        if not both:
+            continue
+        uv_l = np.array([[cl["x"], cl["y"]] for cl, _ in both])
+        uv_r = np.array([[cr["x"], cr["y"]] for _, cr in both])
+        X, res = triangulate(uv_l, uv_r, views["L"]["camera"], views["R"]["camera"],
+                             t["rig"]["R"], t["rig"]["t"])
+        X_true = np.array([t["points3d"][cl["row"] * t["cols"] + cl["col"]] for cl, _ in both])
+        worst_px = max(worst_px, float(np.abs(res).max()))
+        worst_mm = max(worst_mm, float(np.linalg.norm(X - X_true, axis=1).max()))
+        n += len(both)
+    ok = n > 0 and worst_px < 1e-6 and worst_mm < 1e-6
+    print(f"selftest: {n} true corners triangulated, worst reprojection {worst_px:.2e} px, "
+          f"worst 3-D error {worst_mm:.2e} mm: {'OK' if ok else 'FAILED'}")
+    return 0 if ok else 1
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("dir")
     ap.add_argument("--markdown", action="store_true", help="markdown tables")
     ap.add_argument("--match-px", type=float, default=2.0,
                     help="largest distance (px) of a detection to its true corner (2)")
+    ap.add_argument("--selftest", action="store_true",
+                    help="check the triangulation on the exact truth and exit")
     a = ap.parse_args()
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+    if a.selftest:
+        sys.exit(selftest(a.dir))
     print(render(tables(a.dir, a.match_px), a.markdown))
 
 

@@ -135,7 +135,12 @@ fn draw_surface(i: usize, rng: &mut ChaCha8Rng) -> (Surface, f64) {
         3 => {
             let r = radius(rng, 45.0, 200.0);
             let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
-            (Surface::SShape { radius_mm: sign * r }, span(r))
+            (
+                Surface::SShape {
+                    radius_mm: sign * r,
+                },
+                span(r),
+            )
         }
         _ => (Surface::Flat, f64::INFINITY),
     }
@@ -156,7 +161,11 @@ fn surface_json(s: Surface) -> Value {
 /// rig's axis, turned in its plane by ±30° and tilted by up to 50° about a random axis.
 fn draw_pose(rng: &mut ChaCha8Rng) -> Isometry3<f64> {
     let depth = rng.gen_range(380.0..620.0);
-    let centre = Vector3::new(rng.gen_range(-80.0..80.0), rng.gen_range(-60.0..60.0), depth);
+    let centre = Vector3::new(
+        rng.gen_range(-80.0..80.0),
+        rng.gen_range(-60.0..60.0),
+        depth,
+    );
     let spin = rng.gen_range(-30f64..30.0).to_radians();
     let tilt = rng.gen_range(0f64..50.0).to_radians();
     let axis_dir = rng.gen_range(0.0..std::f64::consts::PI);
@@ -183,15 +192,47 @@ fn draw_occluder(rng: &mut ChaCha8Rng, corners: &[BoardCorner]) -> Option<Occlud
     })
 }
 
-/// One rendered, detected pair: its truth line and its `ours.jsonl` lines.
-fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed.wrapping_add(i as u64));
-    let cams = cameras();
-    let rig = [
-        camera_from_rig(-HALF_BASELINE),
-        camera_from_rig(HALF_BASELINE),
-    ];
-    let (surface, max_square) = draw_surface(i, &mut rng);
+/// The stereo rig: each camera's intrinsics and its rig frame → camera frame transform.
+struct Rig {
+    cams: [PinholeCamera; 2],
+    poses: [Isometry3<f64>; 2],
+}
+
+impl Rig {
+    fn new() -> Self {
+        Self {
+            cams: cameras(),
+            poses: [
+                camera_from_rig(-HALF_BASELINE),
+                camera_from_rig(HALF_BASELINE),
+            ],
+        }
+    }
+
+    /// `template` seen by camera `v` (0 left, 1 right) with the board at `pose` in the rig frame.
+    fn view(&self, template: &BoardScene, pose: &Isometry3<f64>, v: usize) -> BoardScene {
+        BoardScene {
+            camera: self.cams[v],
+            pose: self.poses[v] * pose,
+            ..template.clone()
+        }
+    }
+
+    /// Left camera frame → right camera frame.
+    fn stereo(&self) -> Isometry3<f64> {
+        self.poses[1] * self.poses[0].inverse()
+    }
+}
+
+/// Pair `i`'s board (surface, square size, grey levels; no degradations yet) and its pose in the
+/// rig frame: the first of [`POSE_TRIES`] random poses with [`MIN_VISIBLE`] of the corners visible
+/// in both views, else the best one.
+fn draw_board(
+    i: usize,
+    rng: &mut ChaCha8Rng,
+    rig: &Rig,
+) -> Result<(BoardScene, Isometry3<f64>), String> {
+    let (surface, max_square) = draw_surface(i, rng);
     let square_mm = rng.gen_range(14.0..22.0f64).min(max_square);
     let black = rng.gen_range(0.05..0.2);
     let white = rng.gen_range(0.7..0.95);
@@ -208,22 +249,23 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
         supersample: 8,
         ..BoardScene::default()
     };
-    let view_scene = |pose: &Isometry3<f64>, v: usize| BoardScene {
-        camera: cams[v],
-        pose: rig[v] * pose,
-        ..template.clone()
-    };
-    // The first pose with enough corners visible in both views, else the best one.
     let mut best: Option<(f64, Isometry3<f64>)> = None;
     for _ in 0..POSE_TRIES {
-        let pose = draw_pose(&mut rng);
+        let pose = draw_pose(rng);
         let mut share = 1.0f64;
         for v in 0..2 {
-            let corners = view_scene(&pose, v).corners().map_err(|e| e.to_string())?;
+            let corners = rig
+                .view(&template, &pose, v)
+                .corners()
+                .map_err(|e| e.to_string())?;
             let seen = corners.iter().filter(|c| c.visible).count();
             share = share.min(seen as f64 / corners.len() as f64);
         }
-        if best.as_ref().map_or(true, |(s, _)| share > *s) {
+        let better = match &best {
+            Some((s, _)) => share > *s,
+            None => true,
+        };
+        if better {
             best = Some((share, pose));
         }
         if share >= MIN_VISIBLE {
@@ -231,7 +273,14 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
         }
     }
     let (_, pose) = best.ok_or("no pose drawn")?;
+    Ok((template, pose))
+}
 
+/// One rendered, detected pair: its truth line and its `ours.jsonl` lines.
+fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed.wrapping_add(i as u64));
+    let rig = Rig::new();
+    let (template, pose) = draw_board(i, &mut rng, &rig)?;
     let mut views = serde_json::Map::new();
     let mut ours = Vec::new();
     for (v, side) in ["L", "R"].into_iter().enumerate() {
@@ -239,7 +288,7 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
             blur: rng.gen_range(0.7..1.2),
             noise: rng.gen_range(0.005..0.01),
             lighting_gradient: [rng.gen_range(-0.3..0.3), rng.gen_range(-0.3..0.3)],
-            ..view_scene(&pose, v)
+            ..rig.view(&template, &pose, v)
         };
         if rng.gen_bool(args.occluded_share) {
             let corners = scene.corners().map_err(|e| e.to_string())?;
@@ -281,19 +330,21 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
             }),
         );
     }
-    let left = view_scene(&pose, 0).geometry().map_err(|e| e.to_string())?;
+    let left = rig
+        .view(&template, &pose, 0)
+        .geometry()
+        .map_err(|e| e.to_string())?;
     let points3d: Vec<[f64; 3]> = (0..ROWS)
         .flat_map(|r| (0..COLS).map(move |c| (r, c)))
         .map(|(r, c)| left.sheet_to_camera(left.corner_sheet(r, c)).0)
         .collect();
-    // Left camera → right camera: right ∘ left⁻¹.
-    let stereo = rig[1] * rig[0].inverse();
+    let stereo = rig.stereo();
     let r = stereo.rotation.to_rotation_matrix();
     let m = r.matrix();
     let t = stereo.translation.vector;
     let truth = json!({
-        "pair": i, "surface": surface_json(surface), "rows": ROWS, "cols": COLS,
-        "square_mm": square_mm,
+        "pair": i, "surface": surface_json(template.surface), "rows": ROWS, "cols": COLS,
+        "square_mm": template.square_mm,
         "rig": { "R": [[m[(0, 0)], m[(0, 1)], m[(0, 2)]], [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
                        [m[(2, 0)], m[(2, 1)], m[(2, 2)]]],
                  "t": [t.x, t.y, t.z] },
@@ -363,6 +414,14 @@ mod tests {
     use super::*;
     use nalgebra::Point3;
 
+    /// Pinhole projection with the two-term radial distortion of the module docs.
+    fn project(cam: &PinholeCamera, p: Point3<f64>) -> [f64; 2] {
+        let (xn, yn) = (p.x / p.z, p.y / p.z);
+        let r2 = xn * xn + yn * yn;
+        let d = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2;
+        [cam.fx * xn * d + cam.cx, cam.fy * yn * d + cam.cy]
+    }
+
     #[test]
     fn rig_cameras_look_at_the_convergence_point_from_the_baseline_ends() {
         for x in [-HALF_BASELINE, HALF_BASELINE] {
@@ -371,9 +430,88 @@ mod tests {
             assert!((centre - Point3::new(x, 0.0, 0.0)).norm() < 1e-9);
             let p = cam * Point3::new(0.0, 0.0, CONVERGENCE);
             assert!(p.x.abs() < 1e-9 && p.y.abs() < 1e-9 && p.z > 0.0, "{p}");
+            // Toe-in is a turn about the vertical: image rows stay level.
+            let down = cam.rotation * Vector3::y();
+            assert!((down - Vector3::y()).norm() < 1e-12, "{down}");
         }
-        let stereo = camera_from_rig(HALF_BASELINE) * camera_from_rig(-HALF_BASELINE).inverse();
-        let baseline = (stereo.inverse() * Point3::origin()).coords.norm();
-        assert!((baseline - 2.0 * HALF_BASELINE).abs() < 1e-9);
+        // The right camera sits 100 mm along the rig's x axis, which the left camera sees turned
+        // by its toe-in angle.
+        let rig = Rig::new();
+        let baseline = (rig.stereo().inverse() * Point3::origin()).coords;
+        let want = rig.poses[0].rotation * Vector3::new(2.0 * HALF_BASELINE, 0.0, 0.0);
+        assert!((baseline - want).norm() < 1e-9, "{baseline} {want}");
+        let toe_in = (HALF_BASELINE / CONVERGENCE).atan();
+        assert!(
+            (want.z / want.norm() - toe_in.sin()).abs() < 1e-12,
+            "{want}"
+        );
+    }
+
+    /// The truth written for a pair is consistent: the 3-D corners (left camera frame) project onto
+    /// the left view's corners, and through the stereo transform onto the right view's.
+    #[test]
+    fn pair_truth_is_one_board_seen_through_the_rig() {
+        let rig = Rig::new();
+        let stereo = rig.stereo();
+        let mut enough = 0;
+        for i in 0..10 {
+            let mut rng = ChaCha8Rng::seed_from_u64(100 + i as u64);
+            let (template, pose) = draw_board(i, &mut rng, &rig).unwrap();
+            let left = rig.view(&template, &pose, 0);
+            let right = rig.view(&template, &pose, 1);
+            let g = left.geometry().unwrap();
+            let (cl, cr) = (left.corners().unwrap(), right.corners().unwrap());
+            let mut seen = [0, 0];
+            for (a, b) in cl.iter().zip(&cr) {
+                assert_eq!((a.row, a.col), (b.row, b.col));
+                let p = Point3::from(g.sheet_to_camera(g.corner_sheet(a.row, a.col)).0);
+                for (c, cam, q) in [(a, &left.camera, p), (b, &right.camera, stereo * p)] {
+                    let [x, y] = project(cam, q);
+                    assert!(
+                        (x - c.x).abs() < 1e-6 && (y - c.y).abs() < 1e-6,
+                        "{c:?} {x} {y}"
+                    );
+                }
+                seen[0] += a.visible as usize;
+                seen[1] += b.visible as usize;
+            }
+            let share = seen[0].min(seen[1]) as f64 / cl.len() as f64;
+            enough += (share >= MIN_VISIBLE) as usize;
+            // A bent board keeps most of its squares facing the camera.
+            assert!(template.square_mm <= 22.0 && template.square_mm > 8.0);
+        }
+        assert!(
+            enough >= 8,
+            "{enough} of 10 pairs show 85 % of the corners in both views"
+        );
+    }
+
+    #[test]
+    fn occluders_cross_the_board_and_need_two_visible_corners() {
+        let rig = Rig::new();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (template, pose) = draw_board(0, &mut rng, &rig).unwrap();
+        let corners = rig.view(&template, &pose, 0).corners().unwrap();
+        let bar = draw_occluder(&mut rng, &corners).unwrap();
+        assert!(bar.width >= 8.0 && bar.width < 20.0);
+        let hidden = BoardScene {
+            occluders: vec![bar],
+            ..rig.view(&template, &pose, 0)
+        };
+        let after = hidden
+            .corners()
+            .unwrap()
+            .iter()
+            .filter(|c| c.visible)
+            .count();
+        assert!(after < corners.iter().filter(|c| c.visible).count());
+        let none: Vec<BoardCorner> = corners
+            .iter()
+            .map(|c| BoardCorner {
+                visible: false,
+                ..*c
+            })
+            .collect();
+        assert!(draw_occluder(&mut rng, &none).is_none());
     }
 }
