@@ -10,7 +10,9 @@
 #    it creates, JOBS (default 2) views at a time (OUT_DIR/peers.jsonl);
 # 3. prints the tables and writes them as markdown, with the command and commit, to
 #    OUT_DIR/report.md.
-# A full run of 40 pairs takes about 15 min on 2 cores, mostly the peers.
+# A full run of 40 pairs takes about 15 min on 2 cores, mostly the peers (OpenCV's
+# findChessboardCorners can take minutes on a curved board it fails on: board_peers.py gives every
+# view's child process at most 120 s).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-bench/out/board_accuracy}
@@ -19,13 +21,13 @@ shift $(( $# < 2 ? $# : 2 ))
 jobs=${JOBS:-2}
 cmd="bash bench/board_accuracy.sh $out $pairs${*:+ $*}"
 start=$(date +%s)
+commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
+git diff --quiet HEAD 2>/dev/null || commit="$commit (with uncommitted changes)"
 cargo build --release --locked -p conic-corners-bench --bin board-accuracy
 ./target/release/board-accuracy --out "$out" --pairs "$pairs" "$@"
 bash bench/setup_venv.sh
 bench/.venv/bin/python bench/board_peers.py "$out" --jobs "$jobs"
 bench/.venv/bin/python bench/board_report.py "$out"
-commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
-git diff --quiet HEAD 2>/dev/null || commit="$commit (with uncommitted changes)"
 {
     echo "Command: \`$cmd\` (JOBS=$jobs) at commit $commit, $(date -u +%Y-%m-%d), $(( $(date +%s) - start )) s."
     echo

@@ -2,7 +2,7 @@
 """Run the board-level peers of the curved-board benchmark on its rendered views.
 
 Usage (bench/board_accuracy.sh renders the views first):
-  board_peers.py DIR [--jobs 2] [--timeout 300] [--methods m1,m2]
+  board_peers.py DIR [--jobs 2] [--timeout 120] [--methods m1,m2]
 
 Reads DIR/truth.jsonl (crates/conic-corners-bench/src/bin/board_accuracy.rs; only each view's
 "image" and the board's "rows" / "cols" are used, for OpenCV's pattern size) and writes
@@ -19,17 +19,19 @@ Methods (bench/peer_detectors.py):
   calib-targets       calib_targets.detect_chessboard, default parameters.
   chess-corners-r5    ChESS + saddle-point refiner of radius 5; no board structure.
 
-Robustness: each view runs in its own child process (this script with --one), which prints one
-line per method as soon as it is done; when the child crashes (a segfault in a C extension) or
-times out, the method it was running is recorded as failed and a new child runs the remaining
-ones. So one peer failing on one image costs that result only. ms is the method's wall time in
+Robustness: each view runs in its own child process (this script with --one), which announces
+each method and prints its result as soon as it is done; when the child crashes (a segfault in a C
+extension) or a method runs longer than --timeout seconds, that method is recorded as failed and a
+new child runs the remaining ones. So one peer failing on one image costs that result only. ms is the method's wall time in
 the child; with --jobs > 1 views run concurrently, so times are indicative only.
 """
 import argparse
 import json
 import os
+import select
 import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -71,6 +73,7 @@ def run_one(path, pattern, methods):
         sys.exit(f"board_peers: cannot read {path}")
     fns = runners(pattern)
     for m in methods:
+        print(json.dumps({"start": m}), flush=True)
         rec = {"method": m}
         t0 = time.perf_counter()
         try:
@@ -84,6 +87,43 @@ def run_one(path, pattern, methods):
         print(json.dumps(rec), flush=True)
 
 
+def run_child(cmd, env, timeout, out, todo):
+    """Runs one child, filing its results into `out`; returns why it stopped early (or None).
+
+    The child announces each method before running it; each gets `timeout` seconds, after which
+    the child is killed."""
+    with tempfile.TemporaryFile() as err:
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, env=env, bufsize=0)
+        fd, buf = p.stdout.fileno(), b""
+        deadline, why = time.monotonic() + timeout, None
+        while True:
+            wait = deadline - time.monotonic()
+            if wait <= 0 or not select.select([fd], [], [], wait)[0]:
+                p.kill()
+                why = f"timeout after {timeout:g} s"
+                break
+            chunk = os.read(fd, 1 << 16)
+            if not chunk:
+                break
+            buf += chunk
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                if "start" in rec:
+                    deadline = time.monotonic() + timeout
+                elif rec.get("method") in todo:
+                    out[rec["method"]] = rec
+        p.stdout.close()
+        code = p.wait()
+        if why is None and code != 0:
+            err.seek(0)
+            why = f"exit status {code}: {err.read().decode(errors='replace').strip()[-300:]}"
+        return why
+
+
 def run_view(root, image, pattern, methods, timeout):
     """Every method on one view, in children; a crash or timeout fails one method only."""
     out, todo = {}, list(methods)
@@ -92,25 +132,13 @@ def run_view(root, image, pattern, methods, timeout):
     while todo:
         cmd = [sys.executable, os.path.abspath(__file__), "--one", os.path.join(root, image),
                "--pattern", f"{pattern[0]}x{pattern[1]}", "--methods", ",".join(todo)]
-        fail = None
-        try:
-            p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
-            stdout, why = p.stdout, f"exit status {p.returncode}: {p.stderr.strip()[-300:]}"
-        except subprocess.TimeoutExpired as e:
-            stdout = e.stdout.decode() if isinstance(e.stdout, bytes) else (e.stdout or "")
-            why = f"timeout after {timeout} s"
-        for line in stdout.splitlines():
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if rec.get("method") in todo:
-                out[rec["method"]] = rec
+        why = run_child(cmd, env, timeout, out, todo)
         todo = [m for m in todo if m not in out]
         if todo:
             # The first unreported method is the one that crashed or hung.
             fail = todo.pop(0)
-            out[fail] = {"method": fail, "corners": [], "ms": None, "error": why}
+            out[fail] = {"method": fail, "corners": [], "ms": None,
+                         "error": why or "no result"}
             print(f"board_peers: {fail} on {image}: {why}", file=sys.stderr)
     return [dict(out[m], image=image) for m in methods]
 
@@ -119,7 +147,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[1])
     ap.add_argument("dir", nargs="?", help="benchmark directory with truth.jsonl")
     ap.add_argument("--jobs", type=int, default=2, help="views processed concurrently (2)")
-    ap.add_argument("--timeout", type=float, default=300.0, help="seconds per child (300)")
+    ap.add_argument("--timeout", type=float, default=120.0, help="seconds per child (120)")
     ap.add_argument("--methods", help="comma-separated subset of the methods")
     ap.add_argument("--one", metavar="PNG", help=argparse.SUPPRESS)
     ap.add_argument("--pattern", help=argparse.SUPPRESS)

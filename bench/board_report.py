@@ -12,8 +12,10 @@ the nearest detection within --match-px (2 px); the peers' (and our) grid labels
    curvature kappa = max(|kappa_row|, |kappa_col|) (the two grid lines through it, in the image,
    px^-1; bins of 1e-3: [0,1), [1,2), ..., [6,inf)), the RMSE (px) of the matched corners' errors and
    their count; then over all bins the RMSE, median, 95th percentile, and the detection share
-   (matched / visible true corners over all views).
-2. The same per surface kind (RMSE, count).
+   (matched / visible true corners over all views). Then the median per bin, and the RMSE per bin
+   over only the corners every method found (the same corners for all: OpenCV finds whole boards
+   only, so this set leans towards fully visible, flatter boards).
+2. The RMSE per surface kind (RMSE, count).
 3. Stereo triangulation (IV-B): in each pair, the corners a method matched in both views (same true
    (row, col)) are triangulated with the known rig and intrinsics: undistorted (radial k1, k2, by
    Newton's method), linear DLT in normalized coordinates, then Gauss-Newton on the pixel
@@ -155,7 +157,7 @@ def summarize(root, match_px):
     methods = [m for m in OURS_ORDER + PEER_ORDER if m in present]
     methods += sorted(present - set(methods))
 
-    per = {m: [] for m in methods}  # (err, bin, kind, sigma)
+    per = {m: [] for m in methods}  # (err, bin, kind, sigma, (image, (row, col)))
     visible = 0
     stereo = {m: {"res": [], "res_bin": defaultdict(list), "e3": [], "keys": {}} for m in methods}
     for t in truth:
@@ -173,7 +175,8 @@ def summarize(root, match_px):
                 kap = {(c["row"], c["col"]): max(abs(c["curvature"][0]), abs(c["curvature"][1]))
                        for c in v["corners"]}
                 for key, (dx, dy, j) in mm.items():
-                    per[m].append((math.hypot(dx, dy), curvature_bin(kap[key]), kind, sig[j]))
+                    per[m].append((math.hypot(dx, dy), curvature_bin(kap[key]), kind, sig[j],
+                                   (v["image"], key)))
         # Stereo.
         cam_l, cam_r = views["L"]["camera"], views["R"]["camera"]
         cols = t["cols"]
@@ -209,6 +212,19 @@ def fmt(v, spec=".4f"):
     return "-" if v is None else format(v, spec)
 
 
+def by_bin(entries, stat):
+    """Cells `stat(errors) (count)` per curvature bin."""
+    cells = []
+    for b in range(len(BIN_NAMES)):
+        eb = [x[0] for x in entries if x[1] == b]
+        cells.append(f"{fmt(stat(eb))} ({len(eb)})" if eb else "- (0)")
+    return cells
+
+
+def median(v):
+    return float(np.median(v)) if len(v) else None
+
+
 def tables(root, match_px):
     methods, per, visible, stereo, ms, errors = summarize(root, match_px)
     out = []
@@ -217,10 +233,7 @@ def tables(root, match_px):
     body = []
     for m in methods:
         e = per[m]
-        row = [m]
-        for b in range(len(BIN_NAMES)):
-            eb = [x[0] for x in e if x[1] == b]
-            row.append(f"{fmt(rms(eb))} ({len(eb)})" if eb else "- (0)")
+        row = [m] + by_bin(e, rms)
         errs = np.array([x[0] for x in e])
         row += [fmt(rms(errs)), fmt(float(np.median(errs)) if len(errs) else None),
                 fmt(float(np.percentile(errs, 95)) if len(errs) else None),
@@ -229,6 +242,14 @@ def tables(root, match_px):
     out.append(("Error against truth (px) by local edge curvature (1e-3 px^-1): RMSE (corners); "
                 f"matched: share of the {visible} visible true corners found within {match_px:g} px",
                 head, body))
+
+    out.append(("Median error against truth (px) by local edge curvature (corners)",
+                ["method"] + BIN_NAMES, [[m] + by_bin(per[m], median) for m in methods]))
+
+    common = set.intersection(*({x[4] for x in per[m]} for m in methods)) if methods else set()
+    out.append((f"Error against truth (px) on the {len(common)} corners every method found: "
+                "RMSE (corners)", ["method"] + BIN_NAMES,
+                [[m] + by_bin([x for x in per[m] if x[4] in common], rms) for m in methods]))
 
     kinds = sorted({x[2] for m in methods for x in per[m]})
     head = ["method"] + kinds
