@@ -1,11 +1,12 @@
 //! `board-accuracy`: the curved-board accuracy benchmark (paper Table I and experiment IV-B).
 //!
-//! Renders `N` stereo pairs of checkerboards bent around cylinders (radius 45–200 mm, convex or
-//! concave), elliptic columns and S-shaped surfaces (two opposite arcs), plus some flat ones, in
-//! random poses in front of a fixed stereo rig with radial distortion, moderate blur
-//! (σ ∈ [0.7, 1.2] px), noise (σ ∈ [0.5, 1] % of the 0..1 range), uneven light and optional
-//! occluders; saves each view as the 8-bit PNG every method reads, and runs conic-corners on
-//! exactly those pixels, once per [`RefineMode`].
+//! Renders `N` stereo pairs of 7×9-inner-corner checkerboards bent around cylinders (radius
+//! 45–200 mm, log-uniform, convex or concave), elliptic columns and S-shaped surfaces (two opposite
+//! arcs), plus flat ones (pair `i` takes them in turn by `i mod 5`), in random poses in front of a
+//! fixed stereo rig with radial distortion, moderate blur (σ ∈ [0.7, 1.2] px), noise
+//! (σ ∈ [0.5, 1] % of the 0..1 range), uneven light and optional occluders; edge pixels are
+//! area-sampled with 8 × 8 sub-samples. Saves each view as the 8-bit PNG every method reads, and
+//! runs conic-corners on exactly those pixels, once per [`RefineMode`].
 //!
 //! **Rig.** Both cameras are 1920×1200 pinholes with their own intrinsics and two-term radial
 //! distortion (`x_d = x_n (1 + k₁r² + k₂r⁴)`, OpenCV's model with `p₁ = p₂ = k₃ = 0`). In the rig
