@@ -29,7 +29,8 @@ bash bench/setup_venv.sh
 bench/.venv/bin/python bench/board_peers.py "$out" --jobs "$jobs"
 bench/.venv/bin/python bench/board_report.py "$out"
 {
-    echo "Command: \`$cmd\` (JOBS=$jobs) at commit $commit, $(date -u +%Y-%m-%d), $(( $(date +%s) - start )) s."
+    took=$(( $(date +%s) - start ))
+    echo "Command: \`$cmd\` (JOBS=$jobs) at commit $commit, $(date -u +%Y-%m-%d), $took s."
     echo
     bench/.venv/bin/python bench/board_report.py "$out" --markdown
 } > "$out/report.md"

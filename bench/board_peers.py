@@ -19,11 +19,12 @@ Methods (bench/peer_detectors.py):
   calib-targets       calib_targets.detect_chessboard, default parameters.
   chess-corners-r5    ChESS + saddle-point refiner of radius 5; no board structure.
 
-Robustness: each view runs in its own child process (this script with --one), which announces
-each method and prints its result as soon as it is done; when the child crashes (a segfault in a C
+Robustness: each view runs in its own child process (this script with --one), which announces each
+method and prints its result as soon as it is done; when the child crashes (a segfault in a C
 extension) or a method runs longer than --timeout seconds, that method is recorded as failed and a
-new child runs the remaining ones. So one peer failing on one image costs that result only. ms is the method's wall time in
-the child; with --jobs > 1 views run concurrently, so times are indicative only.
+new child runs the remaining ones. So one peer failing on one image costs that result only. ms is
+the method's wall time in the child; with --jobs > 1 views run concurrently, so times are
+indicative only.
 """
 import argparse
 import json

@@ -5,13 +5,14 @@ Usage: board_report.py DIR [--markdown] [--match-px 2]
        board_report.py DIR --selftest   (triangulates the exact truth: errors must vanish)
 
 Reads DIR/truth.jsonl and DIR/ours.jsonl (board-accuracy), DIR/peers.jsonl (board_peers.py; may be
-missing). Every method is matched by position, the same way: each visible true corner of a view takes
-the nearest detection within --match-px (2 px); the peers' (and our) grid labels are not used.
+missing). Every method is matched by position, the same way: each visible true corner of a view
+takes the nearest detection within --match-px (2 px); the peers' (and our) grid labels are not
+used.
 
 1. Error against truth by curvature (Table I style): per method and bin of the corner's local edge
    curvature kappa = max(|kappa_row|, |kappa_col|) (the two grid lines through it, in the image,
-   px^-1; bins of 1e-3: [0,1), [1,2), ..., [6,inf)), the RMSE (px) of the matched corners' errors and
-   their count; then over all bins the RMSE, median, 95th percentile, and the detection share
+   px^-1; bins of 1e-3: [0,1), [1,2), ..., [6,inf)), the RMSE (px) of the matched corners' errors
+   and their count; then over all bins the RMSE, median, 95th percentile, and the detection share
    (matched / visible true corners over all views). Then the median per bin, and the RMSE per bin
    over only the corners every method found (the same corners for all: OpenCV finds whole boards
    only, so this set leans towards fully visible, flatter boards).
@@ -67,7 +68,7 @@ def curvature_bin(kappa):
 
 
 def match(view, points, match_px):
-    """{(row, col): (dx, dy, index)} of the visible true corners with a detection within match_px."""
+    """{(row, col): (dx, dy, index)}: visible true corners with a detection within match_px."""
     truth = [c for c in view["corners"] if c["visible"]]
     if not truth or len(points) == 0:
         return {}
@@ -191,10 +192,9 @@ def summarize(root, match_px):
                 continue
             tl = {(c["row"], c["col"]): c for c in views["L"]["corners"]}
             tr = {(c["row"], c["col"]): c for c in views["R"]["corners"]}
-            uv_l = np.array([[tl[k]["x"] + matched[m]["L"][k][0], tl[k]["y"] + matched[m]["L"][k][1]]
-                             for k in keys])
-            uv_r = np.array([[tr[k]["x"] + matched[m]["R"][k][0], tr[k]["y"] + matched[m]["R"][k][1]]
-                             for k in keys])
+            ml, mr = matched[m]["L"], matched[m]["R"]
+            uv_l = np.array([[tl[k]["x"] + ml[k][0], tl[k]["y"] + ml[k][1]] for k in keys])
+            uv_r = np.array([[tr[k]["x"] + mr[k][0], tr[k]["y"] + mr[k][1]] for k in keys])
             X, res = triangulate(uv_l, uv_r, cam_l, cam_r, t["rig"]["R"], t["rig"]["t"])
             X_true = np.array([t["points3d"][r * cols + c] for r, c in keys])
             s = stereo[m]
@@ -240,7 +240,8 @@ def tables(root, match_px):
                 f"{len(errs) / visible:.1%}" if visible else "-"]
         body.append(row)
     out.append(("Error against truth (px) by local edge curvature (1e-3 px^-1): RMSE (corners); "
-                f"matched: share of the {visible} visible true corners found within {match_px:g} px",
+                f"matched: share of the {visible} visible true corners found within "
+                f"{match_px:g} px",
                 head, body))
 
     out.append(("Median error against truth (px) by local edge curvature (corners)",
@@ -278,7 +279,8 @@ def tables(root, match_px):
             f"{ratio:.2f} ({len(shared)})" if ratio is not None else "-")
         body.append([m, str(len(s["e3"])), fmt(rms(s["res"])), fmt(rms(s["e3"]), ".3f"),
                      fmt(float(np.median(s["e3"])) if s["e3"] else None, ".3f"), ratio_s])
-    out.append(("Stereo triangulation with the known rig (corners found in both views)", head, body))
+    out.append(("Stereo triangulation with the known rig (corners found in both views)",
+                head, body))
 
     head = ["method"] + BIN_NAMES
     body = []
