@@ -12,7 +12,9 @@
 #    OUT_DIR/report.md.
 # A full run of 40 pairs takes about 15 min on 2 cores, mostly the peers (OpenCV's
 # findChessboardCorners can take minutes on a curved board it fails on: board_peers.py gives every
-# view's child process at most 120 s).
+# method at most 120 s per view). Options after N_PAIRS go to board-accuracy, e.g.
+# `--occluded-share 0.5` (a bar across the board in half the views: findChessboardCorners then
+# mostly runs into its timeout) or `--seed 7`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-bench/out/board_accuracy}
