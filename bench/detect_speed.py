@@ -49,56 +49,17 @@ import subprocess
 import sys
 import time
 
-# peers.py pins the peers' thread pools to one thread before they load.
+# peer_detectors (through peers.py) pins the peers' thread pools to one thread before they load.
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peers import CSP_CRITERIA, libcbdetect_checkerboard, _chess_detector  # noqa: E402
+from peer_detectors import (  # noqa: E402
+    calib_targets, chess_corners, libcbdetect_board, opencv_fcc, opencv_sb,
+)
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 MATCH_PX = 3.0
 WALL_RUNS = 3
-
-
-def opencv_fcc(img, pattern):
-    ok, pts = cv2.findChessboardCorners(img, pattern)
-    if not ok:
-        return np.zeros((0, 2))
-    pts = cv2.cornerSubPix(img, pts, (5, 5), (-1, -1), CSP_CRITERIA)
-    return pts.reshape(-1, 2)
-
-
-def opencv_sb(img, pattern, flags=0):
-    ok, pts = cv2.findChessboardCornersSB(img, pattern, flags=flags)
-    return pts.reshape(-1, 2) if ok else np.zeros((0, 2))
-
-
-def libcbdetect_board(img):
-    cb = libcbdetect_checkerboard(img)
-    if cb is None:
-        return np.zeros((0, 2))
-    cb.find_corners()
-    cb.find_board_from_corners()
-    n = int(cb.rows) * int(cb.cols)
-    if n <= 0:
-        return np.zeros((0, 2))
-    u, v = np.zeros(n), np.zeros(n)
-    cb.get_board_corners(u, v)
-    pts = np.stack([u, v], axis=1)
-    return pts[np.all(np.isfinite(pts), axis=1) & (pts[:, 0] >= 0)]
-
-
-def calib_targets(img):
-    import calib_targets as ct
-
-    r = ct.detect_chessboard(img)
-    if r is None:
-        return np.zeros((0, 2))
-    return np.array([c.position for c in r.corners], dtype=np.float64).reshape(-1, 2)
-
-
-def chess_corners(img):
-    return np.asarray(_chess_detector(2).detect(np.ascontiguousarray(img)).xy).reshape(-1, 2)
 
 
 def peers(pattern):
@@ -109,7 +70,7 @@ def peers(pattern):
         ("opencv-sb-accuracy", lambda img: opencv_sb(img, pattern, cv2.CALIB_CB_ACCURACY)),
         ("libcbdetect", libcbdetect_board),
         ("calib-targets", calib_targets),
-        ("chess-corners", chess_corners),
+        ("chess-corners", lambda img: chess_corners(img, 2)),
     ]
 
 

@@ -1,0 +1,378 @@
+#!/usr/bin/env python3
+"""Tables of the curved-board benchmark (paper Table I and experiment IV-B).
+
+Usage: board_report.py DIR [--markdown] [--match-px 2]
+       board_report.py DIR --selftest   (triangulates the exact truth: errors must vanish)
+
+Reads DIR/truth.jsonl and DIR/ours.jsonl (board-accuracy), DIR/peers.jsonl (board_peers.py; may be
+missing). Every method is matched by position, the same way: each visible true corner of a view
+takes the nearest detection within --match-px (2 px); the peers' (and our) grid labels are not
+used.
+
+1. Error against truth by curvature (Table I style): per method and bin of the corner's local edge
+   curvature kappa = max(|kappa_row|, |kappa_col|) (the two grid lines through it, in the image,
+   px^-1; bins of 1e-3: [0,1), [1,2), ..., [6,inf)), the RMSE (px) of the matched corners' errors
+   and their count; then over all bins the RMSE, median, 95th percentile, and the detection share
+   (matched / visible true corners over all views). Then the median per bin, and the RMSE per bin
+   over only the corners every method found (the same corners for all: OpenCV finds whole boards
+   only, so this set leans towards fully visible, flatter boards).
+2. The RMSE per surface kind (RMSE, count).
+3. Stereo triangulation (IV-B): in each pair, the corners a method matched in both views (same true
+   (row, col)) are triangulated with the known rig and intrinsics: undistorted (radial k1, k2, by
+   Newton's method), linear DLT in normalized coordinates, then Gauss-Newton on the pixel
+   reprojection error of both views. Reported: corners, reprojection RMSE (px, over the 2-D residual
+   of every observation), 3-D error RMSE and median (mm, against the exact corner in the left camera
+   frame), and the ratio of the reprojection RMSE to libcbdetect's on the corners both found.
+4. Stereo reprojection RMSE by curvature (the paper's Table I proper; kappa = max over both views).
+5. Calibration of the board-wide fit's sigma (conic-corners-board): share of corners whose error is
+   within 1, 2, 3 sigma (sigma = std. dev. in the worst direction; for an isotropic 2-D Gaussian the
+   shares would be 39.3 %, 86.5 %, 98.9 %), over the corners that carry a sigma.
+6. Run time: mean ms per view (ours in-process, detection only, parallel inside; peers in a child
+   process, concurrent with another view: indicative only).
+"""
+import argparse
+import json
+import math
+import os
+import signal
+import sys
+from collections import defaultdict
+
+import numpy as np
+
+BINS = [0, 1, 2, 3, 4, 5, 6, math.inf]  # 1e-3 px^-1
+BIN_NAMES = ["[0,1)", "[1,2)", "[2,3)", "[3,4)", "[4,5)", "[5,6)", "[6,inf)"]
+OURS_ORDER = ("conic-corners-local", "conic-corners-board")
+PEER_ORDER = ("opencv-fcc+csp", "opencv-sb", "opencv-sb-accuracy", "libcbdetect", "calib-targets",
+              "chess-corners-r5")
+REFERENCE = "libcbdetect"
+GAUSS_2D = (0.393, 0.865, 0.989)
+
+
+def read_jsonl(path, required=True):
+    if not os.path.exists(path):
+        if required:
+            sys.exit(f"board_report: {path} not found")
+        print(f"board_report: {path} not found, skipped", file=sys.stderr)
+        return []
+    with open(path) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def curvature_bin(kappa):
+    k = kappa * 1e3
+    for i in range(len(BINS) - 1):
+        if BINS[i] <= k < BINS[i + 1]:
+            return i
+    return None
+
+
+def match(view, points, match_px):
+    """{(row, col): (dx, dy, index)}: visible true corners with a detection within match_px."""
+    truth = [c for c in view["corners"] if c["visible"]]
+    if not truth or len(points) == 0:
+        return {}
+    t = np.array([[c["x"], c["y"]] for c in truth])
+    d = np.hypot(t[:, None, 0] - points[None, :, 0], t[:, None, 1] - points[None, :, 1])
+    j = d.argmin(axis=1)
+    out = {}
+    for i, c in enumerate(truth):
+        if d[i, j[i]] <= match_px:
+            out[(c["row"], c["col"])] = (points[j[i], 0] - c["x"], points[j[i], 1] - c["y"], j[i])
+    return out
+
+
+def project(X, cam, R=None, t=None):
+    """Pixel projection (with radial distortion) of (N, 3) points given in the left camera frame."""
+    p = X if R is None else X @ np.asarray(R).T + np.asarray(t)
+    xn, yn = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
+    r2 = xn * xn + yn * yn
+    d = 1 + cam["k1"] * r2 + cam["k2"] * r2 * r2
+    return np.stack([cam["fx"] * xn * d + cam["cx"], cam["fy"] * yn * d + cam["cy"]], axis=1)
+
+
+def undistort(uv, cam):
+    """Normalized undistorted coordinates of (N, 2) pixels: Newton on the radius."""
+    xd = (uv[:, 0] - cam["cx"]) / cam["fx"]
+    yd = (uv[:, 1] - cam["cy"]) / cam["fy"]
+    rd = np.hypot(xd, yd)
+    r = rd.copy()
+    for _ in range(20):
+        f = r * (1 + cam["k1"] * r**2 + cam["k2"] * r**4) - rd
+        r = r - f / (1 + 3 * cam["k1"] * r**2 + 5 * cam["k2"] * r**4)
+    s = np.where(rd > 0, r / np.maximum(rd, 1e-300), 1.0)
+    return np.stack([xd * s, yd * s], axis=1)
+
+
+def triangulate(uv_l, uv_r, cam_l, cam_r, R, t):
+    """(N, 3) points (left camera frame) minimizing the pixel reprojection error in both views."""
+    R, t = np.asarray(R), np.asarray(t)
+    nl, nr = undistort(uv_l, cam_l), undistort(uv_r, cam_r)
+    P0 = np.hstack([np.eye(3), np.zeros((3, 1))])
+    P1 = np.hstack([R, t[:, None]])
+    X = np.empty((len(uv_l), 3))
+    for i in range(len(uv_l)):
+        A = np.stack([nl[i, 0] * P0[2] - P0[0], nl[i, 1] * P0[2] - P0[1],
+                      nr[i, 0] * P1[2] - P1[0], nr[i, 1] * P1[2] - P1[1]])
+        h = np.linalg.svd(A)[2][-1]
+        X[i] = h[:3] / h[3]
+
+    def residual(X):
+        return np.hstack([project(X, cam_l) - uv_l, project(X, cam_r, R, t) - uv_r])
+
+    for _ in range(5):
+        r0 = residual(X)
+        J = np.empty((len(X), 4, 3))
+        for k in range(3):
+            h = 1e-6 * np.maximum(1.0, np.abs(X[:, k]))
+            Xh = X.copy()
+            Xh[:, k] += h
+            J[:, :, k] = (residual(Xh) - r0) / h[:, None]
+        JtJ = np.einsum("nik,nil->nkl", J, J)
+        Jtr = np.einsum("nik,ni->nk", J, r0)
+        X = X - np.linalg.solve(JtJ + 1e-12 * np.eye(3), Jtr[:, :, None])[:, :, 0]
+    return X, residual(X)
+
+
+def rms(v):
+    v = np.asarray(v, dtype=np.float64)
+    return float(np.sqrt(np.mean(v * v))) if len(v) else None
+
+
+def summarize(root, match_px):
+    truth = read_jsonl(os.path.join(root, "truth.jsonl"))
+    dets = read_jsonl(os.path.join(root, "ours.jsonl")) + read_jsonl(
+        os.path.join(root, "peers.jsonl"), required=False)
+    found = {}
+    ms = defaultdict(list)
+    errors = defaultdict(int)
+    for r in dets:
+        pts = np.array([c[:2] for c in r["corners"]], dtype=np.float64).reshape(-1, 2)
+        sig = np.array([c[2] if len(c) > 2 and c[2] is not None else np.nan for c in r["corners"]])
+        found[(r["image"], r["method"])] = (pts, sig)
+        if isinstance(r.get("ms"), (int, float)):
+            ms[r["method"]].append(r["ms"])
+        if r.get("error"):
+            errors[r["method"]] += 1
+    present = {m for _, m in found}
+    methods = [m for m in OURS_ORDER + PEER_ORDER if m in present]
+    methods += sorted(present - set(methods))
+
+    per = {m: [] for m in methods}  # (err, bin, kind, sigma, (image, (row, col)))
+    visible = 0
+    stereo = {m: {"res": [], "res_bin": defaultdict(list), "e3": [], "keys": {}} for m in methods}
+    for t in truth:
+        kind = t["surface"]["kind"]
+        views = t["views"]
+        for v in views.values():
+            visible += sum(c["visible"] for c in v["corners"])
+        matched = {}
+        for m in methods:
+            matched[m] = {}
+            for side, v in views.items():
+                pts, sig = found.get((v["image"], m), (np.zeros((0, 2)), np.zeros(0)))
+                mm = match(v, pts, match_px)
+                matched[m][side] = mm
+                kap = {(c["row"], c["col"]): max(abs(c["curvature"][0]), abs(c["curvature"][1]))
+                       for c in v["corners"]}
+                for key, (dx, dy, j) in mm.items():
+                    per[m].append((math.hypot(dx, dy), curvature_bin(kap[key]), kind, sig[j],
+                                   (v["image"], key)))
+        # Stereo.
+        cam_l, cam_r = views["L"]["camera"], views["R"]["camera"]
+        cols = t["cols"]
+        kap2 = defaultdict(float)
+        for v in views.values():
+            for c in v["corners"]:
+                k = max(abs(c["curvature"][0]), abs(c["curvature"][1]))
+                kap2[(c["row"], c["col"])] = max(kap2[(c["row"], c["col"])], k)
+        for m in methods:
+            keys = sorted(set(matched[m]["L"]) & set(matched[m]["R"]))
+            if not keys:
+                continue
+            tl = {(c["row"], c["col"]): c for c in views["L"]["corners"]}
+            tr = {(c["row"], c["col"]): c for c in views["R"]["corners"]}
+            ml, mr = matched[m]["L"], matched[m]["R"]
+            uv_l = np.array([[tl[k]["x"] + ml[k][0], tl[k]["y"] + ml[k][1]] for k in keys])
+            uv_r = np.array([[tr[k]["x"] + mr[k][0], tr[k]["y"] + mr[k][1]] for k in keys])
+            X, res = triangulate(uv_l, uv_r, cam_l, cam_r, t["rig"]["R"], t["rig"]["t"])
+            X_true = np.array([t["points3d"][r * cols + c] for r, c in keys])
+            s = stereo[m]
+            for i, k in enumerate(keys):
+                obs = [math.hypot(res[i, 0], res[i, 1]), math.hypot(res[i, 2], res[i, 3])]
+                s["res"] += obs
+                s["res_bin"][curvature_bin(kap2[k])] += obs
+                e3 = float(np.linalg.norm(X[i] - X_true[i]))
+                s["e3"].append(e3)
+                s["keys"][(t["pair"], k)] = obs
+    return methods, per, visible, stereo, ms, errors
+
+
+def fmt(v, spec=".4f"):
+    return "-" if v is None else format(v, spec)
+
+
+def by_bin(entries, stat):
+    """Cells `stat(errors) (count)` per curvature bin."""
+    cells = []
+    for b in range(len(BIN_NAMES)):
+        eb = [x[0] for x in entries if x[1] == b]
+        cells.append(f"{fmt(stat(eb))} ({len(eb)})" if eb else "- (0)")
+    return cells
+
+
+def median(v):
+    return float(np.median(v)) if len(v) else None
+
+
+def tables(root, match_px):
+    methods, per, visible, stereo, ms, errors = summarize(root, match_px)
+    out = []
+
+    head = ["method"] + BIN_NAMES + ["all RMSE", "median", "p95", "matched"]
+    body = []
+    for m in methods:
+        e = per[m]
+        row = [m] + by_bin(e, rms)
+        errs = np.array([x[0] for x in e])
+        row += [fmt(rms(errs)), fmt(float(np.median(errs)) if len(errs) else None),
+                fmt(float(np.percentile(errs, 95)) if len(errs) else None),
+                f"{len(errs) / visible:.1%}" if visible else "-"]
+        body.append(row)
+    out.append(("Error against truth (px) by local edge curvature (1e-3 px^-1): RMSE (corners); "
+                f"matched: share of the {visible} visible true corners found within "
+                f"{match_px:g} px",
+                head, body))
+
+    out.append(("Median error against truth (px) by local edge curvature (corners)",
+                ["method"] + BIN_NAMES, [[m] + by_bin(per[m], median) for m in methods]))
+
+    common = set.intersection(*({x[4] for x in per[m]} for m in methods)) if methods else set()
+    out.append((f"Error against truth (px) on the {len(common)} corners every method found: "
+                "RMSE (corners)", ["method"] + BIN_NAMES,
+                [[m] + by_bin([x for x in per[m] if x[4] in common], rms) for m in methods]))
+
+    kinds = sorted({x[2] for m in methods for x in per[m]})
+    head = ["method"] + kinds
+    body = []
+    for m in methods:
+        row = [m]
+        for k in kinds:
+            ek = [x[0] for x in per[m] if x[2] == k]
+            row.append(f"{fmt(rms(ek))} ({len(ek)})" if ek else "- (0)")
+        body.append(row)
+    out.append(("Error against truth (px) by surface: RMSE (corners)", head, body))
+
+    ref = stereo.get(REFERENCE, {}).get("keys", {})
+    head = ["method", "corners", "reproj RMSE px", "3-D RMSE mm", "3-D median mm",
+            f"reproj / {REFERENCE} (shared corners)"]
+    body = []
+    for m in methods:
+        s = stereo[m]
+        shared = [k for k in s["keys"] if k in ref]
+        ratio = None
+        if shared and m != REFERENCE:
+            a = rms([o for k in shared for o in s["keys"][k]])
+            b = rms([o for k in shared for o in ref[k]])
+            ratio = a / b if b else None
+        ratio_s = "1" if m == REFERENCE and ref else (
+            f"{ratio:.2f} ({len(shared)})" if ratio is not None else "-")
+        body.append([m, str(len(s["e3"])), fmt(rms(s["res"])), fmt(rms(s["e3"]), ".3f"),
+                     fmt(float(np.median(s["e3"])) if s["e3"] else None, ".3f"), ratio_s])
+    out.append(("Stereo triangulation with the known rig (corners found in both views)",
+                head, body))
+
+    head = ["method"] + BIN_NAMES
+    body = []
+    for m in methods:
+        rb = stereo[m]["res_bin"]
+        body.append([m] + [f"{fmt(rms(rb[b]))} ({len(rb[b]) // 2})" if rb[b] else "- (0)"
+                           for b in range(len(BIN_NAMES))])
+    out.append(("Stereo reprojection RMSE (px) by curvature (max over both views; 1e-3 px^-1): "
+                "RMSE (corners)", head, body))
+
+    head = ["method", "corners with sigma", "median sigma px", "within 1 sigma", "2 sigma",
+            "3 sigma", "RMS err/sigma"]
+    body = []
+    for m in methods:
+        es = np.array([(x[0], x[3]) for x in per[m] if np.isfinite(x[3]) and x[3] > 0])
+        if not len(es):
+            continue
+        z = es[:, 0] / es[:, 1]
+        body.append([m, str(len(es)), fmt(float(np.median(es[:, 1]))),
+                     *[f"{np.mean(z <= k):.1%}" for k in (1, 2, 3)], f"{rms(z):.2f}"])
+    if body:
+        out.append(("Reported sigma against the actual error (isotropic 2-D Gaussian: "
+                    + ", ".join(f"{g:.1%}" for g in GAUSS_2D) + ", RMS err/sigma 1.41)",
+                    head, body))
+
+    head = ["method", "mean ms / view", "views", "failures (raised, crashed, timed out)"]
+    body = [[m, fmt(float(np.mean(ms[m])) if ms[m] else None, ".0f"), str(len(ms[m])),
+             str(errors[m])] for m in methods]
+    out.append(("Run time (indicative: ours in-process on all cores; peers one thread per view, "
+                "two views at a time)", head, body))
+    return out
+
+
+def render(tabs, markdown):
+    lines = []
+    for title, head, body in tabs:
+        lines.append(f"**{title}**" if markdown else f"== {title} ==")
+        lines.append("")
+        if markdown:
+            lines.append("| " + " | ".join(head) + " |")
+            lines.append("|" + "|".join(" --- " if i == 0 else " ---: " for i in range(len(head)))
+                         + "|")
+            lines += ["| " + " | ".join(r) + " |" for r in body]
+        else:
+            widths = [max(len(x) for x in col) for col in zip(head, *body)]
+            for i, r in enumerate([head] + body):
+                lines.append("  ".join(c.ljust(w) if j == 0 else c.rjust(w)
+                                       for j, (c, w) in enumerate(zip(r, widths))))
+                if i == 0:
+                    lines.append("  ".join("-" * w for w in widths))
+        lines.append("")
+    return "\n".join(lines)
+
+
+def selftest(root):
+    """Triangulating every pair's exact corners must give the exact 3-D corners back."""
+    worst_px = worst_mm = 0.0
+    n = 0
+    for t in read_jsonl(os.path.join(root, "truth.jsonl")):
+        views = t["views"]
+        both = [(cl, cr) for cl, cr in zip(views["L"]["corners"], views["R"]["corners"])
+                if cl["visible"] and cr["visible"]]
+        if not both:
+            continue
+        uv_l = np.array([[cl["x"], cl["y"]] for cl, _ in both])
+        uv_r = np.array([[cr["x"], cr["y"]] for _, cr in both])
+        X, res = triangulate(uv_l, uv_r, views["L"]["camera"], views["R"]["camera"],
+                             t["rig"]["R"], t["rig"]["t"])
+        X_true = np.array([t["points3d"][cl["row"] * t["cols"] + cl["col"]] for cl, _ in both])
+        worst_px = max(worst_px, float(np.abs(res).max()))
+        worst_mm = max(worst_mm, float(np.linalg.norm(X - X_true, axis=1).max()))
+        n += len(both)
+    ok = n > 0 and worst_px < 1e-6 and worst_mm < 1e-6
+    print(f"selftest: {n} true corners triangulated, worst reprojection {worst_px:.2e} px, "
+          f"worst 3-D error {worst_mm:.2e} mm: {'OK' if ok else 'FAILED'}")
+    return 0 if ok else 1
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("dir")
+    ap.add_argument("--markdown", action="store_true", help="markdown tables")
+    ap.add_argument("--match-px", type=float, default=2.0,
+                    help="largest distance (px) of a detection to its true corner (2)")
+    ap.add_argument("--selftest", action="store_true",
+                    help="check the triangulation on the exact truth and exit")
+    a = ap.parse_args()
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+    if a.selftest:
+        sys.exit(selftest(a.dir))
+    print(render(tables(a.dir, a.match_px), a.markdown))
+
+
+if __name__ == "__main__":
+    main()

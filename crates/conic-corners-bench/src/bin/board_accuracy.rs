@@ -1,0 +1,518 @@
+//! `board-accuracy`: the curved-board accuracy benchmark (paper Table I and experiment IV-B).
+//!
+//! Renders `N` stereo pairs of 7×9-inner-corner checkerboards bent around cylinders (radius
+//! 45–200 mm, log-uniform, convex or concave), elliptic columns and S-shaped surfaces (two opposite
+//! arcs), plus flat ones (pair `i` takes them in turn by `i mod 5`), in random poses in front of a
+//! fixed stereo rig with radial distortion, moderate blur (σ ∈ [0.7, 1.2] px), noise
+//! (σ ∈ [0.5, 1] % of the 0..1 range), uneven light and optional occluders; edge pixels are
+//! area-sampled with 8 × 8 sub-samples. Saves each view as the 8-bit PNG every method reads, and
+//! runs conic-corners on exactly those pixels, once per [`RefineMode`].
+//!
+//! **Rig.** Both cameras are 1920×1200 pinholes with their own intrinsics and two-term radial
+//! distortion (`x_d = x_n (1 + k₁r² + k₂r⁴)`, OpenCV's model with `p₁ = p₂ = k₃ = 0`). In the rig
+//! frame (x right, y down, z forward, mm) the left camera sits at `(−50, 0, 0)`, the right one at
+//! `(50, 0, 0)`, both toed in to look at `(0, 0, 500)` (±5.7°). A board's pose is drawn in the rig
+//! frame; each view's pose is the camera's rig → camera transform composed with it, the scene
+//! being otherwise the same.
+//!
+//! **Outputs** in `OUT`:
+//! - `images/PPPP_L.png`, `images/PPPP_R.png`: the views;
+//! - `truth.jsonl`, one line per pair: `{"pair", "surface": {"kind", ...mm}, "rows", "cols",
+//!   "square_mm", "rig": {"R", "t"}` (left camera frame → right camera frame,
+//!   `p_R = R p_L + t`, mm), `"views": {"L"|"R": {"image", "camera": {"width", "height", "fx",
+//!   "fy", "cx", "cy", "k1", "k2"}, "blur", "noise", "noise_seed", "occluders", "corners": [{"row",
+//!   "col", "x", "y", "visible", "curvature": [row line, column line]}]}}, "points3d": [[X, Y, Z]]}`
+//!   where `points3d` (row-major like `corners`) are the exact corners in the left camera frame (mm);
+//!   image coordinates x right, y down, the centre of the top-left pixel at `(0, 0)`, curvature in
+//!   px⁻¹ as [`BoardCorner::curvature`];
+//! - `ours.jsonl`, one line per view and method (`conic-corners-local`, `conic-corners-board`):
+//!   `{"image", "method", "ms", "corners": [[x, y, sigma | null]]}` with the corners of every board
+//!   found (sigma: [`conic_corners::detect::DetectedCorner::sigma`]).
+//!
+//! `bench/board_peers.py` adds the peers, `bench/board_report.py` the tables;
+//! `bench/board_accuracy.sh` runs all three.
+
+use clap::Parser;
+use conic_corners::detect::{detect, DetectParams, RefineMode};
+use conic_corners::synth::{BoardCorner, BoardScene, Occluder, PinholeCamera, Surface};
+use conic_corners::GrayImage;
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde_json::{json, Value};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(about = "Render stereo pairs of curved checkerboards and run conic-corners on them")]
+struct Args {
+    /// Output directory (created).
+    #[arg(long)]
+    out: PathBuf,
+    /// Stereo pairs to render.
+    #[arg(long, default_value_t = 40)]
+    pairs: usize,
+    /// Base seed; pair i draws everything from a generator seeded with `seed + i`.
+    #[arg(long, default_value_t = 2026)]
+    seed: u64,
+    /// Probability that a view gets an occluder bar across the board.
+    #[arg(long, default_value_t = 0.0)]
+    occluded_share: f64,
+}
+
+/// Inner corners per column and per row of every board.
+const ROWS: usize = 7;
+const COLS: usize = 9;
+/// Half the stereo baseline (mm) and the distance (mm) where the optical axes cross.
+const HALF_BASELINE: f64 = 50.0;
+const CONVERGENCE: f64 = 500.0;
+/// Poses tried per pair; the first with this share of corners visible in both views is kept.
+const POSE_TRIES: usize = 100;
+const MIN_VISIBLE: f64 = 0.85;
+
+/// The two cameras of the rig: intrinsics differ slightly, as in a real pair.
+fn cameras() -> [PinholeCamera; 2] {
+    let base = PinholeCamera::default();
+    [
+        PinholeCamera {
+            fx: 1602.0,
+            fy: 1600.5,
+            cx: 962.3,
+            cy: 597.1,
+            k1: -0.12,
+            k2: 0.04,
+            ..base
+        },
+        PinholeCamera {
+            fx: 1596.4,
+            fy: 1597.2,
+            cx: 955.8,
+            cy: 603.4,
+            k1: -0.09,
+            k2: 0.02,
+            ..base
+        },
+    ]
+}
+
+/// Rig frame → camera frame of a camera at `(x, 0, 0)` looking at `(0, 0, CONVERGENCE)`.
+fn camera_from_rig(x: f64) -> Isometry3<f64> {
+    let z = Vector3::new(-x, 0.0, CONVERGENCE).normalize();
+    let xa = Vector3::y().cross(&z).normalize();
+    let ya = z.cross(&xa);
+    let rot = Rotation3::from_matrix_unchecked(Matrix3::from_rows(&[
+        xa.transpose(),
+        ya.transpose(),
+        z.transpose(),
+    ]));
+    let rot = UnitQuaternion::from_rotation_matrix(&rot);
+    // p_cam = R (p_rig − c) = R p_rig − R c.
+    let t = -(rot * Vector3::new(x, 0.0, 0.0));
+    Isometry3::from_parts(Translation3::from(t), rot)
+}
+
+/// A surface of the mix, by pair index, with its size drawn from `rng`, and the largest square
+/// side (mm) that keeps the bent board mostly facing the camera (about ±63° of arc each side).
+/// Radii are log-uniform: image curvature goes as 1/R, so the curvature bins fill more evenly.
+fn draw_surface(i: usize, rng: &mut ChaCha8Rng) -> (Surface, f64) {
+    let span = |rho: f64| 2.2 * rho / (COLS + 1) as f64;
+    let radius = |rng: &mut ChaCha8Rng, lo: f64, hi: f64| lo * (hi / lo).powf(rng.gen::<f64>());
+    match i % 5 {
+        0 => {
+            let r = radius(rng, 45.0, 200.0);
+            (Surface::Cylinder { radius_mm: r }, span(r))
+        }
+        1 => {
+            let r = radius(rng, 45.0, 200.0);
+            (Surface::Cylinder { radius_mm: -r }, span(r))
+        }
+        2 => {
+            let a = radius(rng, 45.0, 150.0);
+            let b = a * rng.gen_range(0.5..1.5);
+            (Surface::EllipticColumn { a_mm: a, b_mm: b }, span(a.min(b)))
+        }
+        3 => {
+            let r = radius(rng, 45.0, 200.0);
+            let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+            (
+                Surface::SShape {
+                    radius_mm: sign * r,
+                },
+                span(r),
+            )
+        }
+        _ => (Surface::Flat, f64::INFINITY),
+    }
+}
+
+fn surface_json(s: Surface) -> Value {
+    match s {
+        Surface::Flat => json!({ "kind": "flat" }),
+        Surface::Cylinder { radius_mm } => json!({ "kind": "cylinder", "radius_mm": radius_mm }),
+        Surface::EllipticColumn { a_mm, b_mm } => {
+            json!({ "kind": "elliptic_column", "a_mm": a_mm, "b_mm": b_mm })
+        }
+        Surface::SShape { radius_mm } => json!({ "kind": "s_shape", "radius_mm": radius_mm }),
+    }
+}
+
+/// A random board pose in the rig frame: centre at depth 380–620 mm within ±80 × ±60 mm of the
+/// rig's axis, turned in its plane by ±30° and tilted by up to 50° about a random axis.
+fn draw_pose(rng: &mut ChaCha8Rng) -> Isometry3<f64> {
+    let depth = rng.gen_range(380.0..620.0);
+    let centre = Vector3::new(
+        rng.gen_range(-80.0..80.0),
+        rng.gen_range(-60.0..60.0),
+        depth,
+    );
+    let spin = rng.gen_range(-30f64..30.0).to_radians();
+    let tilt = rng.gen_range(0f64..50.0).to_radians();
+    let axis_dir = rng.gen_range(0.0..std::f64::consts::PI);
+    let axis = Unit::new_normalize(Vector3::new(axis_dir.cos(), axis_dir.sin(), 0.0));
+    let rotation = UnitQuaternion::from_axis_angle(&axis, tilt)
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), spin);
+    Isometry3::from_parts(Translation3::from(centre), rotation)
+}
+
+/// A random bar across the board's visible corners (image coordinates).
+fn draw_occluder(rng: &mut ChaCha8Rng, corners: &[BoardCorner]) -> Option<Occluder> {
+    let seen: Vec<&BoardCorner> = corners.iter().filter(|c| c.visible).collect();
+    if seen.len() < 2 {
+        return None;
+    }
+    let a = seen[rng.gen_range(0..seen.len())];
+    let b = seen[rng.gen_range(0..seen.len())];
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    Some(Occluder {
+        from: [a.x - 0.3 * dx, a.y - 0.3 * dy],
+        to: [b.x + 0.3 * dx, b.y + 0.3 * dy],
+        width: rng.gen_range(8.0..20.0),
+        intensity: rng.gen_range(0.2..0.8),
+    })
+}
+
+/// The stereo rig: each camera's intrinsics and its rig frame → camera frame transform.
+struct Rig {
+    cams: [PinholeCamera; 2],
+    poses: [Isometry3<f64>; 2],
+}
+
+impl Rig {
+    fn new() -> Self {
+        Self {
+            cams: cameras(),
+            poses: [
+                camera_from_rig(-HALF_BASELINE),
+                camera_from_rig(HALF_BASELINE),
+            ],
+        }
+    }
+
+    /// `template` seen by camera `v` (0 left, 1 right) with the board at `pose` in the rig frame.
+    fn view(&self, template: &BoardScene, pose: &Isometry3<f64>, v: usize) -> BoardScene {
+        BoardScene {
+            camera: self.cams[v],
+            pose: self.poses[v] * pose,
+            ..template.clone()
+        }
+    }
+
+    /// Left camera frame → right camera frame.
+    fn stereo(&self) -> Isometry3<f64> {
+        self.poses[1] * self.poses[0].inverse()
+    }
+}
+
+/// Pair `i`'s board (surface, square size, grey levels; no degradations yet) and its pose in the
+/// rig frame: the first of [`POSE_TRIES`] random poses with [`MIN_VISIBLE`] of the corners visible
+/// in both views, else the best one.
+fn draw_board(
+    i: usize,
+    rng: &mut ChaCha8Rng,
+    rig: &Rig,
+) -> Result<(BoardScene, Isometry3<f64>), String> {
+    let (surface, max_square) = draw_surface(i, rng);
+    let square_mm = rng.gen_range(14.0..22.0f64).min(max_square);
+    let black = rng.gen_range(0.05..0.2);
+    let white = rng.gen_range(0.7..0.95);
+    let background = rng.gen_range(0.3..0.7);
+    let template = BoardScene {
+        rows: ROWS,
+        cols: COLS,
+        square_mm,
+        margin_mm: square_mm,
+        surface,
+        black,
+        white,
+        background,
+        supersample: 8,
+        ..BoardScene::default()
+    };
+    let mut best: Option<(f64, Isometry3<f64>)> = None;
+    for _ in 0..POSE_TRIES {
+        let pose = draw_pose(rng);
+        let mut share = 1.0f64;
+        for v in 0..2 {
+            let corners = rig
+                .view(&template, &pose, v)
+                .corners()
+                .map_err(|e| e.to_string())?;
+            let seen = corners.iter().filter(|c| c.visible).count();
+            share = share.min(seen as f64 / corners.len() as f64);
+        }
+        let better = match &best {
+            Some((s, _)) => share > *s,
+            None => true,
+        };
+        if better {
+            best = Some((share, pose));
+        }
+        if share >= MIN_VISIBLE {
+            break;
+        }
+    }
+    let (_, pose) = best.ok_or("no pose drawn")?;
+    Ok((template, pose))
+}
+
+/// One rendered, detected pair: its truth line and its `ours.jsonl` lines.
+fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed.wrapping_add(i as u64));
+    let rig = Rig::new();
+    let (template, pose) = draw_board(i, &mut rng, &rig)?;
+    let mut views = serde_json::Map::new();
+    let mut ours = Vec::new();
+    for (v, side) in ["L", "R"].into_iter().enumerate() {
+        let mut scene = BoardScene {
+            blur: rng.gen_range(0.7..1.2),
+            noise: rng.gen_range(0.005..0.01),
+            lighting_gradient: [rng.gen_range(-0.3..0.3), rng.gen_range(-0.3..0.3)],
+            ..rig.view(&template, &pose, v)
+        };
+        if rng.gen_bool(args.occluded_share) {
+            let corners = scene.corners().map_err(|e| e.to_string())?;
+            scene.occluders.extend(draw_occluder(&mut rng, &corners));
+        }
+        let noise_seed: u64 = rng.gen();
+        let rendered = scene.render(noise_seed).map_err(|e| e.to_string())?;
+        let rel = format!("images/{i:04}_{side}.png");
+        let path = args.out.join(&rel);
+        rendered
+            .image
+            .to_luma8(0.0, 1.0)
+            .save(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        ours.extend(detect_view(&path, &rel)?);
+        let cam = scene.camera;
+        let corners: Vec<Value> = rendered
+            .corners
+            .iter()
+            .map(|c| {
+                json!({ "row": c.row, "col": c.col, "x": c.x, "y": c.y, "visible": c.visible,
+                        "curvature": c.curvature })
+            })
+            .collect();
+        let occluders: Vec<Value> = scene
+            .occluders
+            .iter()
+            .map(|o| json!({ "from": o.from, "to": o.to, "width": o.width }))
+            .collect();
+        views.insert(
+            side.into(),
+            json!({
+                "image": rel,
+                "camera": { "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy,
+                            "cx": cam.cx, "cy": cam.cy, "k1": cam.k1, "k2": cam.k2 },
+                "blur": scene.blur, "noise": scene.noise, "noise_seed": noise_seed,
+                "lighting_gradient": scene.lighting_gradient, "occluders": occluders,
+                "corners": corners,
+            }),
+        );
+    }
+    let left = rig
+        .view(&template, &pose, 0)
+        .geometry()
+        .map_err(|e| e.to_string())?;
+    let points3d: Vec<[f64; 3]> = (0..ROWS)
+        .flat_map(|r| (0..COLS).map(move |c| (r, c)))
+        .map(|(r, c)| left.sheet_to_camera(left.corner_sheet(r, c)).0)
+        .collect();
+    let stereo = rig.stereo();
+    let r = stereo.rotation.to_rotation_matrix();
+    let m = r.matrix();
+    let t = stereo.translation.vector;
+    let truth = json!({
+        "pair": i, "surface": surface_json(template.surface), "rows": ROWS, "cols": COLS,
+        "square_mm": template.square_mm,
+        "rig": { "R": [[m[(0, 0)], m[(0, 1)], m[(0, 2)]], [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
+                       [m[(2, 0)], m[(2, 1)], m[(2, 2)]]],
+                 "t": [t.x, t.y, t.z] },
+        "views": views,
+        "points3d": points3d,
+    });
+    Ok((truth, ours))
+}
+
+/// Runs [`detect`] on the saved PNG (the pixels the peers read) in both refine modes.
+fn detect_view(path: &Path, rel: &str) -> Result<Vec<Value>, String> {
+    let image = GrayImage::open(path).map_err(|e| e.to_string())?;
+    let mut out = Vec::new();
+    for (name, mode) in [
+        ("conic-corners-local", RefineMode::Local),
+        ("conic-corners-board", RefineMode::Board),
+    ] {
+        let params = DetectParams {
+            mode,
+            ..DetectParams::default()
+        };
+        let t0 = Instant::now();
+        let det = detect(&image, &params);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let corners: Vec<Value> = det
+            .boards
+            .iter()
+            .flat_map(|b| &b.corners)
+            .map(|c| json!([c.x, c.y, c.sigma]))
+            .collect();
+        out.push(json!({ "image": rel, "method": name, "ms": ms, "corners": corners }));
+    }
+    Ok(out)
+}
+
+fn main() -> Result<(), String> {
+    let args = Args::parse();
+    if !(0.0..=1.0).contains(&args.occluded_share) {
+        return Err("--occluded-share must be in 0..=1".into());
+    }
+    std::fs::create_dir_all(args.out.join("images")).map_err(|e| e.to_string())?;
+    let t0 = Instant::now();
+    let results: Vec<(Value, Vec<Value>)> = (0..args.pairs)
+        .into_par_iter()
+        .map(|i| run_pair(&args, i))
+        .collect::<Result<_, String>>()?;
+    let mut truth =
+        std::fs::File::create(args.out.join("truth.jsonl")).map_err(|e| e.to_string())?;
+    let mut ours = std::fs::File::create(args.out.join("ours.jsonl")).map_err(|e| e.to_string())?;
+    for (t, o) in &results {
+        writeln!(truth, "{t}").map_err(|e| e.to_string())?;
+        for line in o {
+            writeln!(ours, "{line}").map_err(|e| e.to_string())?;
+        }
+    }
+    eprintln!(
+        "board-accuracy: {} pairs in {}, {:.0} s",
+        results.len(),
+        args.out.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    /// Pinhole projection with the two-term radial distortion of the module docs.
+    fn project(cam: &PinholeCamera, p: Point3<f64>) -> [f64; 2] {
+        let (xn, yn) = (p.x / p.z, p.y / p.z);
+        let r2 = xn * xn + yn * yn;
+        let d = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2;
+        [cam.fx * xn * d + cam.cx, cam.fy * yn * d + cam.cy]
+    }
+
+    #[test]
+    fn rig_cameras_look_at_the_convergence_point_from_the_baseline_ends() {
+        for x in [-HALF_BASELINE, HALF_BASELINE] {
+            let cam = camera_from_rig(x);
+            let centre = cam.inverse() * Point3::origin();
+            assert!((centre - Point3::new(x, 0.0, 0.0)).norm() < 1e-9);
+            let p = cam * Point3::new(0.0, 0.0, CONVERGENCE);
+            assert!(p.x.abs() < 1e-9 && p.y.abs() < 1e-9 && p.z > 0.0, "{p}");
+            // Toe-in is a turn about the vertical: image rows stay level.
+            let down = cam.rotation * Vector3::y();
+            assert!((down - Vector3::y()).norm() < 1e-12, "{down}");
+        }
+        // The right camera sits 100 mm along the rig's x axis, which the left camera sees turned
+        // by its toe-in angle.
+        let rig = Rig::new();
+        let baseline = (rig.stereo().inverse() * Point3::origin()).coords;
+        let want = rig.poses[0].rotation * Vector3::new(2.0 * HALF_BASELINE, 0.0, 0.0);
+        assert!((baseline - want).norm() < 1e-9, "{baseline} {want}");
+        let toe_in = (HALF_BASELINE / CONVERGENCE).atan();
+        assert!(
+            (want.z / want.norm() - toe_in.sin()).abs() < 1e-12,
+            "{want}"
+        );
+    }
+
+    /// The truth written for a pair is consistent: the 3-D corners (left camera frame) project onto
+    /// the left view's corners, and through the stereo transform onto the right view's.
+    #[test]
+    fn pair_truth_is_one_board_seen_through_the_rig() {
+        let rig = Rig::new();
+        let stereo = rig.stereo();
+        let mut enough = 0;
+        for i in 0..10 {
+            let mut rng = ChaCha8Rng::seed_from_u64(100 + i as u64);
+            let (template, pose) = draw_board(i, &mut rng, &rig).unwrap();
+            let left = rig.view(&template, &pose, 0);
+            let right = rig.view(&template, &pose, 1);
+            let g = left.geometry().unwrap();
+            let (cl, cr) = (left.corners().unwrap(), right.corners().unwrap());
+            let mut seen = [0, 0];
+            for (a, b) in cl.iter().zip(&cr) {
+                assert_eq!((a.row, a.col), (b.row, b.col));
+                let p = Point3::from(g.sheet_to_camera(g.corner_sheet(a.row, a.col)).0);
+                for (c, cam, q) in [(a, &left.camera, p), (b, &right.camera, stereo * p)] {
+                    let [x, y] = project(cam, q);
+                    assert!(
+                        (x - c.x).abs() < 1e-6 && (y - c.y).abs() < 1e-6,
+                        "{c:?} {x} {y}"
+                    );
+                }
+                seen[0] += a.visible as usize;
+                seen[1] += b.visible as usize;
+            }
+            let share = seen[0].min(seen[1]) as f64 / cl.len() as f64;
+            enough += (share >= MIN_VISIBLE) as usize;
+            // A bent board keeps most of its squares facing the camera.
+            assert!(template.square_mm <= 22.0 && template.square_mm > 8.0);
+        }
+        assert!(
+            enough >= 8,
+            "{enough} of 10 pairs show 85 % of the corners in both views"
+        );
+    }
+
+    #[test]
+    fn occluders_cross_the_board_and_need_two_visible_corners() {
+        let rig = Rig::new();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (template, pose) = draw_board(0, &mut rng, &rig).unwrap();
+        let corners = rig.view(&template, &pose, 0).corners().unwrap();
+        let bar = draw_occluder(&mut rng, &corners).unwrap();
+        assert!(bar.width >= 8.0 && bar.width < 20.0);
+        let hidden = BoardScene {
+            occluders: vec![bar],
+            ..rig.view(&template, &pose, 0)
+        };
+        let after = hidden
+            .corners()
+            .unwrap()
+            .iter()
+            .filter(|c| c.visible)
+            .count();
+        assert!(after < corners.iter().filter(|c| c.visible).count());
+        let none: Vec<BoardCorner> = corners
+            .iter()
+            .map(|c| BoardCorner {
+                visible: false,
+                ..*c
+            })
+            .collect();
+        assert!(draw_occluder(&mut rng, &none).is_none());
+    }
+}
