@@ -11,7 +11,8 @@
 //! arrays may be strided, so the copy walks them in logical order); the pipeline then runs with
 //! the GIL released, so Python threads calling these functions run in parallel.
 
-use conic_corners::detect::{detect as detect_rs, DetectParams};
+use conic_corners::board_fit::Path;
+use conic_corners::detect::{detect as detect_rs, DetectParams, RefineMode};
 use conic_corners::refine::{refine as refine_rs, RefineParams, Status};
 use conic_corners::GrayImage;
 use numpy::ndarray::{Array1, Array2};
@@ -29,6 +30,18 @@ const CONVERGED: u8 = 2;
 const FALLBACK: u8 = 1;
 /// Status code of a corner that could not be refined (the start position is returned).
 const FAILED: u8 = 0;
+
+/// Path code of a corner placed by the single-corner refiner.
+const PATH_LOCAL: u8 = 0;
+/// Path code of a corner placed by the board-wide row and column curves.
+const PATH_BOARD: u8 = 1;
+
+fn path_code(p: Path) -> u8 {
+    match p {
+        Path::Local => PATH_LOCAL,
+        Path::Board => PATH_BOARD,
+    }
+}
 
 fn status_code(s: Status) -> u8 {
     match s {
@@ -217,9 +230,12 @@ fn refine_params(
 ///
 /// Returns one dict per board, largest first, with keys `rows`, `cols`, `points` (N×2 float64,
 /// x then y), `ids` (N×2 int32, row then col), `scores` (N float64), `status` (N uint8: 0 failed,
-/// 1 fallback, 2 converged) and `residuals` (N float64, NaN where not refined).
+/// 1 fallback, 2 converged), `residuals` (N float64, NaN where not refined), `paths` (N uint8:
+/// 0 local, 1 board) and `sigmas` (N float64, NaN where placed by the local refiner).
+///
+/// `refine` is `"board"` (board-wide curve fitting, the default) or `"local"`.
 #[pyfunction]
-#[pyo3(signature = (image, corners=None, *, sigma=None, reach=None, blur=None, min_board_corners=None, stride=None, bgr=false))]
+#[pyo3(signature = (image, corners=None, *, sigma=None, reach=None, blur=None, min_board_corners=None, stride=None, refine="board", bgr=false))]
 #[allow(clippy::too_many_arguments)]
 fn detect<'py>(
     py: Python<'py>,
@@ -230,8 +246,18 @@ fn detect<'py>(
     blur: Option<f64>,
     min_board_corners: Option<i64>,
     stride: Option<i64>,
+    refine: &str,
     bgr: bool,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    let mode = match refine {
+        "board" => RefineMode::Board,
+        "local" => RefineMode::Local,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "refine must be \"board\" or \"local\", got {other:?}"
+            )))
+        }
+    };
     let mut params = DetectParams::default();
     params.prefilter.expected_corners = int_at_least("corners", corners, 1)?;
     if let Some(s) = sigma {
@@ -247,6 +273,7 @@ fn detect<'py>(
     }
     params.refine = refine_params(params.refine.clone(), reach, stride, blur)?;
     params.share_sampling();
+    params.mode = mode;
     params.validate().map_err(PyValueError::new_err)?;
     let gray = gray_from_numpy(image, bgr)?;
     let detection = py.detach(|| detect_rs(&gray, &params));
@@ -260,6 +287,8 @@ fn detect<'py>(
             let mut scores = Array1::<f64>::zeros(n);
             let mut status = Array1::<u8>::zeros(n);
             let mut residuals = Array1::<f64>::zeros(n);
+            let mut paths = Array1::<u8>::zeros(n);
+            let mut sigmas = Array1::<f64>::zeros(n);
             for (i, c) in board.corners.iter().enumerate() {
                 points[[i, 0]] = c.x;
                 points[[i, 1]] = c.y;
@@ -268,6 +297,8 @@ fn detect<'py>(
                 scores[i] = c.score;
                 status[i] = status_code(c.status);
                 residuals[i] = c.residual.unwrap_or(f64::NAN);
+                paths[i] = path_code(c.path);
+                sigmas[i] = c.sigma.unwrap_or(f64::NAN);
             }
             let d = PyDict::new(py);
             d.set_item("rows", board.rows)?;
@@ -277,6 +308,8 @@ fn detect<'py>(
             d.set_item("scores", scores.into_pyarray(py))?;
             d.set_item("status", status.into_pyarray(py))?;
             d.set_item("residuals", residuals.into_pyarray(py))?;
+            d.set_item("paths", paths.into_pyarray(py))?;
+            d.set_item("sigmas", sigmas.into_pyarray(py))?;
             Ok(d)
         })
         .collect()
@@ -366,5 +399,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FAILED", FAILED)?;
     m.add("FALLBACK", FALLBACK)?;
     m.add("CONVERGED", CONVERGED)?;
+    m.add("PATH_LOCAL", PATH_LOCAL)?;
+    m.add("PATH_BOARD", PATH_BOARD)?;
     Ok(())
 }

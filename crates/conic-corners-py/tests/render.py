@@ -124,3 +124,58 @@ class FlatBoard:
 
 def to_u8(img: np.ndarray) -> np.ndarray:
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+
+class CylinderBoard(FlatBoard):
+    """The board of :class:`FlatBoard` wrapped around a cylinder of radius `radius` (board units)
+    whose axis runs along the board's Y (columns bend, rows stay straight in board space), bulging
+    towards the camera: the board point (U, V) lies at
+
+        θ = (U − U₀) / radius,  S = (U₀ + radius·sin θ, V, radius·(1 − cos θ))
+
+    in the board frame (U₀ the middle of the pattern, the sheet tangent to Z = 0 there), then goes
+    through the pose (r, t) and the camera `k` as the flat board does. Arc length along U is kept,
+    so the squares are printed squares bent, not stretched."""
+
+    def __init__(self, k, r, t, radius=220.0, **kw):
+        super().__init__(k, r, t, **kw)
+        self.r, self.t, self.radius = np.asarray(r, np.float64), np.asarray(t, np.float64), radius
+        self.u0 = self.sx * self.square / 2
+
+    def surface(self, u, v):
+        """Board-frame 3-D points (…×3) of board coordinates (U, V)."""
+        th = (u - self.u0) / self.radius
+        return np.stack([self.u0 + self.radius * np.sin(th), v,
+                         self.radius * (1 - np.cos(th))], -1)
+
+    def image_corners(self) -> np.ndarray:
+        b = self.board_corners()
+        p = self.surface(b[..., 0], b[..., 1]) @ self.r.T + self.t
+        p = p @ self.k.T
+        return p[..., :2] / p[..., 2:]
+
+    def value_at(self, x, y):
+        # Ray through the pixel, in the board frame: origin o, direction d = rᵀ k⁻¹ (x, y, 1).
+        o = -self.r.T @ self.t
+        kinv = np.linalg.inv(self.k)
+        dc = np.stack([kinv[0, 0] * x + kinv[0, 1] * y + kinv[0, 2],
+                       kinv[1, 1] * y + kinv[1, 2] + 0 * x, np.ones_like(x)], -1)
+        d = dc @ self.r  # (rᵀ d_c)ᵀ = d_cᵀ r
+        # Nearest intersection with (X − U₀)² + (Z − radius)² = radius².
+        ax, az = o[0] - self.u0, o[2] - self.radius
+        a = d[..., 0] ** 2 + d[..., 2] ** 2
+        b = 2 * (ax * d[..., 0] + az * d[..., 2])
+        c = ax ** 2 + az ** 2 - self.radius ** 2
+        disc = b * b - 4 * a * c
+        hit = disc >= 0
+        s = (-b - np.sqrt(np.where(hit, disc, 0))) / (2 * a)
+        px, py, pz = o[0] + s * d[..., 0], o[1] + s * d[..., 1], o[2] + s * d[..., 2]
+        th = np.arctan2(px - self.u0, self.radius - pz)
+        u = (self.u0 + self.radius * th) / self.square
+        v = py / self.square
+        front = hit & (np.abs(th) < np.pi / 2)
+        inside = front & (u >= 0) & (u < self.sx) & (v >= 0) & (v < self.sy)
+        margin = front & (u >= -1) & (u < self.sx + 1) & (v >= -1) & (v < self.sy + 1)
+        black = ((np.floor(u) + np.floor(v)) % 2) == 0
+        out = np.where(margin, self.bright, self.background)
+        return np.where(inside & black, self.dark, out)

@@ -90,13 +90,15 @@ def test_refine_colour_equals_cli(cli_bin, colour_png, board_png, tmp_path):
     assert_same_as_cli(*cc.refine(rgba, starts, return_residuals=True), cli)
 
 
-def test_detect_equals_cli(cli_bin, board_png):
+@pytest.mark.parametrize("mode", [None, "board", "local"])
+def test_detect_equals_cli(cli_bin, board_png, mode):
     if not cli_has(cli_bin, "detect"):
         pytest.skip("this build of the CLI has no `detect` subcommand yet")
     path, gray, _ = board_png
-    out = run_json([cli_bin, "detect", str(path)])
+    flags = [] if mode is None else ["--refine", mode]
+    out = run_json([cli_bin, "detect", str(path), *flags])
     cli_boards = out["boards"]
-    boards = cc.detect(gray)
+    boards = cc.detect(gray) if mode is None else cc.detect(gray, refine=mode)
     assert len(boards) == len(cli_boards)
     for b, c in zip(boards, cli_boards):
         assert (b.rows, b.cols) == (c["rows"], c["cols"])
@@ -105,3 +107,14 @@ def test_detect_equals_cli(cli_bin, board_png):
             assert (b.points[i, 0], b.points[i, 1]) == (k["x"], k["y"])
             assert (b.ids[i, 0], b.ids[i, 1]) == (k["row"], k["col"])
             assert cc.STATUS_NAMES[b.status[i]] == k["status"]
+            if k["residual"] is None:
+                assert np.isnan(b.residuals[i])
+            else:
+                assert b.residuals[i] == k["residual"]
+            assert cc.PATH_NAMES[b.paths[i]] == k["path"]
+            if k["sigma"] is None:
+                assert np.isnan(b.sigmas[i])
+            else:
+                assert b.sigmas[i] == k["sigma"]
+        if mode != "local":
+            assert (b.paths == cc.PATH_BOARD).any(), "board mode by default, as the CLI"

@@ -23,6 +23,11 @@ Status codes (``Board.status``, the second result of :func:`refine`): :data:`FAI
 position is returned), :data:`FALLBACK` (1, less support: an edge seen on one side only, or
 straight lines instead of curves), :data:`CONVERGED` (2).
 
+Path codes (``Board.paths``): :data:`PATH_LOCAL` (0, placed by the single-corner refiner) and
+:data:`PATH_BOARD` (1, the intersection of the row and column curves fitted along the whole board,
+with ``Board.sigmas`` its standard deviation); :func:`detect` fits board-wide by default and falls
+back to the local refiner per corner where a grid line has too few samples.
+
 Errors: a wrong dtype raises ``TypeError``; a wrong shape, an empty array, non-finite values or an
 out-of-range parameter raise ``ValueError``.
 """
@@ -44,6 +49,9 @@ __all__ = [
     "FALLBACK",
     "CONVERGED",
     "STATUS_NAMES",
+    "PATH_LOCAL",
+    "PATH_BOARD",
+    "PATH_NAMES",
 ]
 
 FAILED: int = _native.FAILED
@@ -51,6 +59,10 @@ FALLBACK: int = _native.FALLBACK
 CONVERGED: int = _native.CONVERGED
 #: Status code → name, the names the CLI prints in its JSON ("failed", "fallback", "converged").
 STATUS_NAMES: Tuple[str, str, str] = ("failed", "fallback", "converged")
+PATH_LOCAL: int = _native.PATH_LOCAL
+PATH_BOARD: int = _native.PATH_BOARD
+#: Path code → name, the names the CLI prints in its JSON ("local", "board").
+PATH_NAMES: Tuple[str, str] = ("local", "board")
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +79,11 @@ class Board:
             a failed corner keeps its pixel-level position.
         residuals: N ``float64`` RMS distances (px) of the edge samples to their fitted curves,
             NaN where the corner was not refined.
+        paths: N ``uint8`` path codes: :data:`PATH_BOARD` where the corner is the intersection
+            of its board-wide row and column curves, :data:`PATH_LOCAL` where the single-corner
+            refiner placed it (every corner with ``refine="local"``).
+        sigmas: N ``float64`` standard deviations (px) of the position in its worst direction,
+            from the board-wide fit's residuals; NaN where ``paths`` is :data:`PATH_LOCAL`.
 
     A board may have holes (occluded corners), so ``len(board)`` can be less than ``rows * cols``.
     """
@@ -78,6 +95,8 @@ class Board:
     scores: np.ndarray
     status: np.ndarray
     residuals: np.ndarray
+    paths: np.ndarray
+    sigmas: np.ndarray
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -86,6 +105,11 @@ class Board:
     def status_names(self) -> List[str]:
         """The status of each corner as a name: "failed", "fallback" or "converged"."""
         return [STATUS_NAMES[s] for s in self.status]
+
+    @property
+    def path_names(self) -> List[str]:
+        """The path of each corner as a name: "local" or "board"."""
+        return [PATH_NAMES[p] for p in self.paths]
 
     def object_points(self, square_size: float = 1.0) -> np.ndarray:
         """N×3 ``float32`` board coordinates ``(col·s, row·s, 0)`` in the order of ``points``,
@@ -115,6 +139,7 @@ def detect(
     blur: Optional[float] = None,
     min_board_corners: Optional[int] = None,
     stride: Optional[int] = None,
+    refine: str = "board",
     bgr: bool = False,
 ) -> List[Board]:
     """Finds every checkerboard(-like) board in ``image`` and refines its corners.
@@ -131,6 +156,10 @@ def detect(
         min_board_corners: smallest board kept, ≥ 4 (default 4).
         stride: scanlines between consecutive edge samples, 1..=64 (default 2 here, as in the
             CLI's ``detect``; 1 gains the last thousandths of a pixel at ~1.6× the time).
+        refine: how corners are placed (the CLI's ``--refine``): ``"board"`` (default) fits the
+            row and column curves along the whole board and intersects them, more accurate and
+            with a per-corner ``sigma``; ``"local"`` refines each corner on its own, as
+            :func:`refine` does.
         bgr: colour images are in OpenCV's B, G, R order.
 
     Returns:
@@ -139,7 +168,8 @@ def detect(
 
     Raises:
         TypeError: unsupported dtype, or ``image`` not an array.
-        ValueError: bad shape, empty or non-finite image, parameter out of range.
+        ValueError: bad shape, empty or non-finite image, parameter out of range, ``refine`` not
+            ``"board"`` or ``"local"``.
     """
     raw = _native.detect(
         _as_array(image),
@@ -149,6 +179,7 @@ def detect(
         blur=blur,
         min_board_corners=min_board_corners,
         stride=stride,
+        refine=refine,
         bgr=bgr,
     )
     return [Board(**b) for b in raw]

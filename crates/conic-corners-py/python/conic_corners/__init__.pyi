@@ -16,6 +16,12 @@ CONVERGED: int
 """Status 2: both edges fitted on both sides of the corner."""
 STATUS_NAMES: Tuple[str, str, str]
 """Status code -> name ("failed", "fallback", "converged")."""
+PATH_LOCAL: int
+"""Path 0: placed by the single-corner refiner."""
+PATH_BOARD: int
+"""Path 1: intersection of the board-wide row and column curves."""
+PATH_NAMES: Tuple[str, str]
+"""Path code -> name ("local", "board")."""
 
 class Board:
     """One detected board: its labelled corners sorted by (row, col)."""
@@ -32,6 +38,10 @@ class Board:
     """N status codes (FAILED, FALLBACK, CONVERGED)."""
     residuals: npt.NDArray[np.float64]
     """N RMS fit residuals in px, NaN where not refined."""
+    paths: npt.NDArray[np.uint8]
+    """N path codes (PATH_LOCAL, PATH_BOARD)."""
+    sigmas: npt.NDArray[np.float64]
+    """N standard deviations (px, worst direction) of board-fitted positions, NaN where local."""
     def __init__(
         self,
         rows: int,
@@ -41,10 +51,14 @@ class Board:
         scores: npt.NDArray[np.float64],
         status: npt.NDArray[np.uint8],
         residuals: npt.NDArray[np.float64],
+        paths: npt.NDArray[np.uint8],
+        sigmas: npt.NDArray[np.float64],
     ) -> None: ...
     def __len__(self) -> int: ...
     @property
     def status_names(self) -> List[str]: ...
+    @property
+    def path_names(self) -> List[str]: ...
     def object_points(self, square_size: float = 1.0) -> npt.NDArray[np.float32]:
         """N×3 (col·s, row·s, 0) in the order of points, for cv2.calibrateCamera."""
     def image_points(self) -> npt.NDArray[np.float32]:
@@ -59,6 +73,7 @@ def detect(
     blur: Optional[float] = None,
     min_board_corners: Optional[int] = None,
     stride: Optional[int] = None,
+    refine: Literal["board", "local"] = "board",
     bgr: bool = False,
 ) -> List[Board]:
     """Finds every board in a grey or colour image; boards largest first."""
