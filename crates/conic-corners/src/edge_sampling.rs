@@ -148,17 +148,16 @@ pub fn fit_sigmoid_with(
     }
     let y = &y[..n];
 
-    let start = start_values(y)?;
+    let [_, _, p0, c0] = start_values(y)?;
     let (theta, fit) = match fixed_width {
         Some(c) => {
             let c = c as f64;
             if !(c.is_finite() && c > 0.0) {
                 return None;
             }
-            let (t, f) = levenberg_marquardt::<3>(y, [start[0], start[1], start[2]], c, params)?;
-            ([t[0], t[1], t[2], c], f)
+            variable_projection::<3>(y, p0, c, params)?
         }
-        None => levenberg_marquardt::<4>(y, start, 0.0, params)?,
+        None => variable_projection::<4>(y, p0, c0, params)?,
     };
     let [a, d, p, c] = theta;
     let nf = n as f64;
@@ -228,44 +227,38 @@ fn start_values(y: &[f64]) -> Option<[f64; 4]> {
     Some([a, first, p, c])
 }
 
-/// Convergence summary of [`levenberg_marquardt`].
-struct LmFit {
+/// Convergence summary of [`variable_projection`].
+struct Convergence {
     rss: f64,
     position_sigma: f64,
     iterations: u32,
 }
 
-/// Residual sum of squares, `JᵀJ` and `Jᵀr` of the model at `theta` (`[a, d, p, c]`, the first `K`
-/// of them free; with `K = 3` the width is `fixed_c`). Returns `None` if `c` is not positive or `p` not finite.
+/// Sums over the samples of the basis `w_i = [σ_i, 1, −g_i, −g_i u_i]` (first `K` entries) at
+/// position `p` and width `c`, with `u_i = (i − p)/c`, `σ_i = 1/(1 + e^{−u_i})` and
+/// `g_i = σ_i (1 − σ_i)/c`: returns `Σ w wᵀ` and `Σ w yᵢ`. The model's Jacobian row over
+/// `[a, d, p, c]` is `w_i` with its last two entries scaled by `a`, so these sums give the normal
+/// equations for any `(a, d)` without another pass. `None` if `c` is not positive or `p` not finite.
 // Index loops mirror the (triangular) matrix algebra more plainly than iterator chains.
 #[allow(clippy::needless_range_loop)]
 #[inline]
-fn normal_equations<const K: usize>(
-    y: &[f64],
-    theta: &[f64; K],
-    fixed_c: f64,
-) -> Option<(f64, [[f64; K]; K], [f64; K])> {
-    let (a, d, p) = (theta[0], theta[1], theta[2]);
-    let c = if K == 4 { theta[3] } else { fixed_c };
+fn basis_sums<const K: usize>(y: &[f64], p: f64, c: f64) -> Option<([[f64; K]; K], [f64; K])> {
     if !(c > 1e-3 && p.is_finite()) {
         return None;
     }
     let inv_c = 1.0 / c;
-    let mut jtj = [[0.0; K]; K];
-    let mut jtr = [0.0; K];
-    let mut rss = 0.0;
+    let mut m = [[0.0; K]; K];
+    let mut v = [0.0; K];
     let mut add = |i: usize, e: f64| {
         // e = exp(−u): one exp per pass instead of one per sample (see below).
-        let u = (i as f64 - p) * inv_c;
         let sig = 1.0 / (1.0 + e);
-        let g = a * sig * (1.0 - sig) * inv_c;
-        let r = a * sig + d - y[i];
-        let row = [sig, 1.0, -g, -g * u];
-        rss += r * r;
+        let g = sig * (1.0 - sig) * inv_c;
+        let u = (i as f64 - p) * inv_c;
+        let w = [sig, 1.0, -g, -g * u];
         for j in 0..K {
-            jtr[j] += row[j] * r;
+            v[j] += w[j] * y[i];
             for l in 0..=j {
-                jtj[j][l] += row[j] * row[l];
+                m[j][l] += w[j] * w[l];
             }
         }
     };
@@ -289,11 +282,129 @@ fn normal_equations<const K: usize>(
     }
     for j in 0..K {
         for l in j + 1..K {
-            jtj[j][l] = jtj[l][j];
+            m[j][l] = m[l][j];
         }
     }
-    Some((rss, jtj, jtr))
+    Some((m, v))
 }
+
+/// The fit at one `(p, c)` with the linear parameters `(a, d)` projected out.
+struct Projected<const K: usize> {
+    a: f64,
+    d: f64,
+    rss: f64,
+    /// `JᵀJ` over the first `K` of `[a, d, p, c]`.
+    jtj: [[f64; K]; K],
+    /// Gauss–Newton step over the same parameters (only its nonlinear part is used).
+    step: [f64; K],
+}
+
+/// Solves for the least-squares `(a, d)` at `(p, c)` and the Gauss–Newton step from there.
+/// `yy = Σ yᵢ²`. `None` when the basis is degenerate (no transition inside the window).
+#[allow(clippy::needless_range_loop)]
+#[inline]
+fn project<const K: usize>(y: &[f64], yy: f64, p: f64, c: f64) -> Option<Projected<K>> {
+    let (m, v) = basis_sums::<K>(y, p, c)?;
+    let det = m[0][0] * m[1][1] - m[0][1] * m[0][1];
+    // det = n² var(σ): relative to n Σσ², it vanishes when σ is constant over the window.
+    if !(det > 1e-12 * m[0][0] * m[1][1]) {
+        return None;
+    }
+    let a = (m[1][1] * v[0] - m[0][1] * v[1]) / det;
+    let d = (m[0][0] * v[1] - m[0][1] * v[0]) / det;
+    // At the projected (a, d) the residual is orthogonal to σ and 1: rss = Σy² − a Σσy − d Σy.
+    let rss = (yy - a * v[0] - d * v[1]).max(0.0);
+    let scale = [1.0, 1.0, a, a];
+    let mut jtj = [[0.0; K]; K];
+    let mut neg_jtr = [0.0; K];
+    for j in 0..K {
+        neg_jtr[j] = -scale[j] * (a * m[j][0] + d * m[j][1] - v[j]);
+        for l in 0..K {
+            jtj[j][l] = scale[j] * scale[l] * m[j][l];
+        }
+    }
+    let step = cholesky_solve(&jtj, &neg_jtr)?;
+    Some(Projected {
+        a,
+        d,
+        rss,
+        jtj,
+        step,
+    })
+}
+
+/// Least squares over the first `K` of `[a, d, p, c]` (normalized intensities; with `K = 3` the
+/// width is `c0`) by variable projection (Golub–Pereyra, with Kaufman's Gauss–Newton step): the
+/// model is linear in `(a, d)`, which are solved in closed form at every `(p, c)`, so the
+/// iteration runs on the one or two nonlinear parameters only and needs no start for `(a, d)`.
+/// Each pass over the samples yields the projected fit and the next step; a step that does not
+/// lower the residual is halved. Stops when the next step moves `p` and `c` by less than
+/// [`STEP_TOLERANCE`] (applied without another pass), or at `params.max_iterations` passes.
+fn variable_projection<const K: usize>(
+    y: &[f64],
+    p0: f64,
+    c0: f64,
+    params: &SigmoidParams,
+) -> Option<([f64; 4], Convergence)> {
+    let n = y.len();
+    let yy: f64 = y.iter().map(|v| v * v).sum();
+    let (mut p, mut c) = (p0, c0);
+    let mut cur = project::<K>(y, yy, p, c)?;
+    let mut iterations = 1;
+    loop {
+        // Far from the edge the logistic's flat tails make Gauss–Newton overshoot: bound the
+        // step to a quarter window in p and to a factor 2 either way in c.
+        let half_window = n as f64 / 4.0;
+        let dp = cur.step[2].clamp(-half_window, half_window);
+        let dc = if K == 4 {
+            cur.step[K - 1].clamp(-0.5 * c, c)
+        } else {
+            0.0
+        };
+        if dp.abs() < STEP_TOLERANCE && dc.abs() < STEP_TOLERANCE {
+            // Convergence is quadratic on the small residuals of an edge profile: this last step
+            // leaves an error far below it, and (a, d, rss) move by O(step) only.
+            p += dp;
+            c += dc;
+            break;
+        }
+        let mut t = 1.0;
+        let mut accepted = None;
+        while iterations < params.max_iterations && t > 1e-3 {
+            iterations += 1;
+            match project::<K>(y, yy, p + t * dp, c + t * dc) {
+                Some(trial) if trial.rss <= cur.rss => {
+                    accepted = Some(trial);
+                    break;
+                }
+                _ => t *= 0.5,
+            }
+        }
+        let Some(next) = accepted else {
+            // No descent left at this precision (or out of passes): at the minimum.
+            break;
+        };
+        p += t * dp;
+        c += t * dc;
+        cur = next;
+    }
+    let mut e_p = [0.0; K];
+    e_p[2] = 1.0;
+    let var_p = cholesky_solve(&cur.jtj, &e_p).map_or(f64::INFINITY, |x| x[2]);
+    let s2 = cur.rss / (n - K) as f64;
+    Some((
+        [cur.a, cur.d, p, c],
+        Convergence {
+            rss: cur.rss,
+            position_sigma: (s2 * var_p).max(0.0).sqrt(),
+            iterations,
+        },
+    ))
+}
+
+/// Step (samples) in `p` and `c` below which [`variable_projection`] stops: well below the noise
+/// of any sample and below the logistic-vs-erf model error.
+const STEP_TOLERANCE: f64 = 1e-3;
 
 /// Solves `m x = b` for symmetric positive definite `m` by Cholesky; `None` if not positive definite.
 #[allow(clippy::needless_range_loop)]
@@ -331,70 +442,6 @@ fn cholesky_solve<const K: usize>(m: &[[f64; K]; K], b: &[f64; K]) -> Option<[f6
         x[i] /= l[i][i];
     }
     Some(x)
-}
-
-/// Levenberg–Marquardt on the first `K` of `[a, d, p, c]` (normalized intensities). Every pass over
-/// the samples evaluates residuals and normal equations together, so an accepted step needs no
-/// second pass.
-fn levenberg_marquardt<const K: usize>(
-    y: &[f64],
-    mut theta: [f64; K],
-    fixed_c: f64,
-    params: &SigmoidParams,
-) -> Option<([f64; K], LmFit)> {
-    let (mut rss, mut jtj, mut jtr) = normal_equations::<K>(y, &theta, fixed_c)?;
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    while iterations < params.max_iterations {
-        iterations += 1;
-        let mut damped = jtj;
-        for (j, row) in damped.iter_mut().enumerate() {
-            row[j] += lambda * jtj[j][j].max(1e-12);
-        }
-        let neg_g = jtr.map(|v| -v);
-        let Some(step) = cholesky_solve(&damped, &neg_g) else {
-            lambda *= 10.0;
-            continue;
-        };
-        let mut trial = theta;
-        for (t, s) in trial.iter_mut().zip(&step) {
-            *t += s;
-        }
-        match normal_equations::<K>(y, &trial, fixed_c) {
-            Some((r, m, g)) if r < rss => {
-                let gain = rss - r;
-                (theta, rss, jtj, jtr) = (trial, r, m, g);
-                lambda = (lambda * 0.1).max(1e-12);
-                // Steps in p (and c) below 1e-4 samples (the next is far smaller: convergence is
-                // quadratic near the minimum, and 1e-4 is well below any sample's noise), or no
-                // measurable gain, mean convergence.
-                let small = step[2].abs() < 1e-4 && (K < 4 || step[K - 1].abs() < 1e-4);
-                if small || gain <= 1e-15 * rss.max(1e-300) {
-                    break;
-                }
-            }
-            _ => {
-                lambda *= 10.0;
-                if lambda > 1e8 {
-                    // No descent direction left at machine precision: at the minimum.
-                    break;
-                }
-            }
-        }
-    }
-    let n = y.len();
-    let mut e_p = [0.0; K];
-    e_p[2] = 1.0;
-    let var_p = cholesky_solve(&jtj, &e_p).map_or(f64::INFINITY, |x| x[2]);
-    let s2 = rss / (n - K) as f64;
-    Some((
-        theta,
-        LmFit {
-            rss,
-            position_sigma: (s2 * var_p).max(0.0).sqrt(),
-            iterations,
-        },
-    ))
 }
 
 /// Which pixel scanline an [`EdgeSample`] was fitted on.
