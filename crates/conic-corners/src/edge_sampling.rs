@@ -129,35 +129,42 @@ pub fn fit_sigmoid_with(
     if !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) {
         return None;
     }
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    // f32 comparisons that a NaN fails, so one branch-free pass finds the range and any
+    // non-finite sample (which makes the range non-finite).
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut finite = true;
     for &v in profile {
-        if !v.is_finite() {
-            return None;
-        }
-        lo = lo.min(v as f64);
-        hi = hi.max(v as f64);
+        finite &= v.is_finite();
+        lo = if v < lo { v } else { lo };
+        hi = if v > hi { v } else { hi };
     }
+    let (lo, hi) = (lo as f64, hi as f64);
     let range = hi - lo;
-    if range <= 0.0 {
-        // Flat profile (the samples are finite, so no NaN here).
+    if !(finite && range > 0.0) {
+        // Non-finite samples, or a flat profile.
         return None;
     }
+    let inv_range = 1.0 / range;
     let mut y = [0.0f64; MAX_SAMPLES];
+    let (mut sum, mut sum_sq) = (0.0, 0.0);
     for (dst, &v) in y.iter_mut().zip(profile) {
-        *dst = (v as f64 - lo) / range;
+        let t = (v as f64 - lo) * inv_range;
+        *dst = t;
+        sum += t;
+        sum_sq += t * t;
     }
     let y = &y[..n];
 
-    let [_, _, p0, c0] = start_values(y)?;
+    let (p0, c0) = start_values(y)?;
     let (theta, fit) = match fixed_width {
         Some(c) => {
             let c = c as f64;
             if !(c.is_finite() && c > 0.0) {
                 return None;
             }
-            variable_projection::<3>(y, p0, c, params)?
+            variable_projection::<3>(y, sum_sq, p0, c, params)?
         }
-        None => variable_projection::<4>(y, p0, c0, params)?,
+        None => variable_projection::<4>(y, sum_sq, p0, c0, params)?,
     };
     let [a, d, p, c] = theta;
     let nf = n as f64;
@@ -171,8 +178,7 @@ pub fn fit_sigmoid_with(
     if !ok {
         return None;
     }
-    let mean = y.iter().sum::<f64>() / nf;
-    let tss: f64 = y.iter().map(|v| (v - mean) * (v - mean)).sum();
+    let tss = sum_sq - sum * sum / nf;
     Some(SigmoidFit {
         position: p,
         amplitude: a * range,
@@ -185,9 +191,9 @@ pub fn fit_sigmoid_with(
     })
 }
 
-/// Start values `[a, d, p, c]` in normalized intensities, or `None` for a profile with no
-/// discernible slope.
-fn start_values(y: &[f64]) -> Option<[f64; 4]> {
+/// Start values `(p, c)` from normalized intensities, or `None` for a profile with no discernible
+/// slope.
+fn start_values(y: &[f64]) -> Option<(f64, f64)> {
     let n = y.len();
     let k = (n / 6).max(2);
     let first = y[..k].iter().sum::<f64>() / k as f64;
@@ -224,7 +230,7 @@ fn start_values(y: &[f64]) -> Option<[f64; 4]> {
         }
     }
     let c = (a.abs() / (4.0 * gmax)).clamp(0.3, n as f64 / 4.0);
-    Some([a, first, p, c])
+    Some((p, c))
 }
 
 /// Convergence summary of [`variable_projection`].
@@ -239,51 +245,65 @@ struct Convergence {
 /// `g_i = σ_i (1 − σ_i)/c`: returns `Σ w wᵀ` and `Σ w yᵢ`. The model's Jacobian row over
 /// `[a, d, p, c]` is `w_i` with its last two entries scaled by `a`, so these sums give the normal
 /// equations for any `(a, d)` without another pass. `None` if `c` is not positive or `p` not finite.
-// Index loops mirror the (triangular) matrix algebra more plainly than iterator chains.
-#[allow(clippy::needless_range_loop)]
 #[inline]
 fn basis_sums<const K: usize>(y: &[f64], p: f64, c: f64) -> Option<([[f64; K]; K], [f64; K])> {
     if !(c > 1e-3 && p.is_finite()) {
         return None;
     }
     let inv_c = 1.0 / c;
-    let mut m = [[0.0; K]; K];
-    let mut v = [0.0; K];
-    let mut add = |i: usize, e: f64| {
-        // e = exp(−u): one exp per pass instead of one per sample (see below).
-        let sig = 1.0 / (1.0 + e);
-        let g = sig * (1.0 - sig) * inv_c;
-        let u = (i as f64 - p) * inv_c;
-        let w = [sig, 1.0, -g, -g * u];
-        for j in 0..K {
-            v[j] += w[j] * y[i];
-            for l in 0..=j {
-                m[j][l] += w[j] * w[l];
-            }
-        }
-    };
     // exp(−(i − p)/c) is geometric in i: start at the sample nearest p, where it is finite and
     // non-zero (|i − p| ≤ ½ unless p is outside the window), and multiply outwards. Each factor
     // only drives the value monotonically to 0 or ∞, whose sigmoids are the right limits; 0·∞
     // cannot occur because the start is 0 or ∞ only when no samples lie on the far side.
     let n = y.len();
     let i0 = p.round().clamp(0.0, (n - 1) as f64) as usize;
-    let e0 = (-(i0 as f64 - p) * inv_c).exp();
+    let mut e = [0.0f64; MAX_SAMPLES];
+    e[i0] = (-(i0 as f64 - p) * inv_c).exp();
     let (down, up) = (inv_c.exp(), (-inv_c).exp());
-    let mut e = e0;
-    for i in i0..n {
-        add(i, e);
-        e *= up;
+    for i in i0 + 1..n {
+        e[i] = e[i - 1] * up;
     }
-    e = e0;
     for i in (0..i0).rev() {
-        e *= down;
-        add(i, e);
+        e[i] = e[i + 1] * down;
     }
-    for j in 0..K {
-        for l in j + 1..K {
-            m[j][l] = m[l][j];
+    // Plain scalar accumulators (w₁ = 1 needs none): the loop then has no array indexing.
+    let (mut s, mut ss, mut sy, mut yt) = (0.0, 0.0, 0.0, 0.0);
+    let (mut sg, mut ssg, mut sgg, mut sgy) = (0.0, 0.0, 0.0, 0.0);
+    let (mut sh, mut ssh, mut sgh, mut shh, mut shy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (i, (&yi, &ei)) in y.iter().zip(&e[..n]).enumerate() {
+        let sig = 1.0 / (1.0 + ei);
+        // σ(1 − σ) = e σ², and stays exact where 1 − σ would cancel.
+        let g = ei * sig * sig * inv_c;
+        s += sig;
+        ss += sig * sig;
+        sy += sig * yi;
+        yt += yi;
+        sg += g;
+        ssg += sig * g;
+        sgg += g * g;
+        sgy += g * yi;
+        if K == 4 {
+            let h = g * (i as f64 - p) * inv_c;
+            sh += h;
+            ssh += sig * h;
+            sgh += g * h;
+            shh += h * h;
+            shy += h * yi;
         }
+    }
+    // Entries of Σ w wᵀ and Σ w y for w = [σ, 1, −g, −h], h = g u.
+    let full_m = [
+        [ss, s, -ssg, -ssh],
+        [s, n as f64, -sg, -sh],
+        [-ssg, -sg, sgg, sgh],
+        [-ssh, -sh, sgh, shh],
+    ];
+    let full_v = [sy, yt, -sgy, -shy];
+    let mut m = [[0.0; K]; K];
+    let mut v = [0.0; K];
+    for (j, (row, vj)) in m.iter_mut().zip(v.iter_mut()).enumerate() {
+        row.copy_from_slice(&full_m[j][..K]);
+        *vj = full_v[j];
     }
     Some((m, v))
 }
@@ -334,7 +354,7 @@ fn project<const K: usize>(y: &[f64], yy: f64, p: f64, c: f64) -> Option<Project
 }
 
 /// Least squares over the first `K` of `[a, d, p, c]` (normalized intensities; with `K = 3` the
-/// width is `c0`) by variable projection (Golub–Pereyra, with Kaufman's Gauss–Newton step): the
+/// width is `c0`; `yy = Σ yᵢ²`) by variable projection (Golub–Pereyra, with Kaufman's Gauss–Newton step): the
 /// model is linear in `(a, d)`, which are solved in closed form at every `(p, c)`, so the
 /// iteration runs on the one or two nonlinear parameters only and needs no start for `(a, d)`.
 /// Each pass over the samples yields the projected fit and the next step; a step that does not
@@ -342,12 +362,12 @@ fn project<const K: usize>(y: &[f64], yy: f64, p: f64, c: f64) -> Option<Project
 /// [`STEP_TOLERANCE`] (applied without another pass), or at `params.max_iterations` passes.
 fn variable_projection<const K: usize>(
     y: &[f64],
+    yy: f64,
     p0: f64,
     c0: f64,
     params: &SigmoidParams,
 ) -> Option<([f64; 4], Convergence)> {
     let n = y.len();
-    let yy: f64 = y.iter().map(|v| v * v).sum();
     let (mut p, mut c) = (p0, c0);
     let mut cur = project::<K>(y, yy, p, c)?;
     let mut iterations = 1;
@@ -404,7 +424,7 @@ fn variable_projection<const K: usize>(
 
 /// Step (samples) in `p` and `c` below which [`variable_projection`] stops: well below the noise
 /// of any sample and below the logistic-vs-erf model error.
-const STEP_TOLERANCE: f64 = 1e-3;
+const STEP_TOLERANCE: f64 = 3e-3;
 
 /// Solves `m x = b` for symmetric positive definite `m` by Cholesky; `None` if not positive definite.
 #[allow(clippy::needless_range_loop)]
