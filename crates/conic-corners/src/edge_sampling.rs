@@ -240,17 +240,44 @@ struct Convergence {
     iterations: u32,
 }
 
+/// A logistic width `c` with the constants that every pass over the samples needs.
+#[derive(Clone, Copy)]
+struct Width {
+    c: f64,
+    inv_c: f64,
+    /// `e^{−1/c}` and `e^{1/c}`: the ratios of `e^{−u}` between neighbouring samples.
+    up: f64,
+    down: f64,
+}
+
+impl Width {
+    /// `None` unless `c` is finite and positive (1e-3 at least).
+    fn new(c: f64) -> Option<Self> {
+        if !(c > 1e-3 && c.is_finite()) {
+            return None;
+        }
+        let inv_c = 1.0 / c;
+        let up = (-inv_c).exp();
+        Some(Self {
+            c,
+            inv_c,
+            up,
+            down: 1.0 / up,
+        })
+    }
+}
+
 /// Sums over the samples of the basis `w_i = [σ_i, 1, −g_i, −g_i u_i]` (first `K` entries) at
 /// position `p` and width `c`, with `u_i = (i − p)/c`, `σ_i = 1/(1 + e^{−u_i})` and
 /// `g_i = σ_i (1 − σ_i)/c`: returns `Σ w wᵀ` and `Σ w yᵢ`. The model's Jacobian row over
 /// `[a, d, p, c]` is `w_i` with its last two entries scaled by `a`, so these sums give the normal
-/// equations for any `(a, d)` without another pass. `None` if `c` is not positive or `p` not finite.
+/// equations for any `(a, d)` without another pass. `None` if `p` is not finite.
 #[inline]
-fn basis_sums<const K: usize>(y: &[f64], p: f64, c: f64) -> Option<([[f64; K]; K], [f64; K])> {
-    if !(c > 1e-3 && p.is_finite()) {
+fn basis_sums<const K: usize>(y: &[f64], p: f64, w: &Width) -> Option<([[f64; K]; K], [f64; K])> {
+    if !p.is_finite() {
         return None;
     }
-    let inv_c = 1.0 / c;
+    let inv_c = w.inv_c;
     // exp(−(i − p)/c) is geometric in i: start at the sample nearest p, where it is finite and
     // non-zero (|i − p| ≤ ½ unless p is outside the window), and multiply outwards. Each factor
     // only drives the value monotonically to 0 or ∞, whose sigmoids are the right limits; 0·∞
@@ -259,12 +286,11 @@ fn basis_sums<const K: usize>(y: &[f64], p: f64, c: f64) -> Option<([[f64; K]; K
     let i0 = p.round().clamp(0.0, (n - 1) as f64) as usize;
     let mut e = [0.0f64; MAX_SAMPLES];
     e[i0] = (-(i0 as f64 - p) * inv_c).exp();
-    let (down, up) = (inv_c.exp(), (-inv_c).exp());
     for i in i0 + 1..n {
-        e[i] = e[i - 1] * up;
+        e[i] = e[i - 1] * w.up;
     }
     for i in (0..i0).rev() {
-        e[i] = e[i + 1] * down;
+        e[i] = e[i + 1] * w.down;
     }
     // Plain scalar accumulators (w₁ = 1 needs none): the loop then has no array indexing.
     let (mut s, mut ss, mut sy, mut yt) = (0.0, 0.0, 0.0, 0.0);
@@ -309,22 +335,27 @@ fn basis_sums<const K: usize>(y: &[f64], p: f64, c: f64) -> Option<([[f64; K]; K
 }
 
 /// The fit at one `(p, c)` with the linear parameters `(a, d)` projected out.
-struct Projected<const K: usize> {
+struct Projected {
     a: f64,
     d: f64,
     rss: f64,
-    /// `JᵀJ` over the first `K` of `[a, d, p, c]`.
-    jtj: [[f64; K]; K],
-    /// Gauss–Newton step over the same parameters (only its nonlinear part is used).
-    step: [f64; K],
+    /// Gauss–Newton step in `(p, c)` (`c` entry 0 when the width is fixed).
+    step: [f64; 2],
+    /// `(JᵀJ)⁻¹` at `p`: the position's variance per unit residual variance.
+    var_p: f64,
 }
 
 /// Solves for the least-squares `(a, d)` at `(p, c)` and the Gauss–Newton step from there.
 /// `yy = Σ yᵢ²`. `None` when the basis is degenerate (no transition inside the window).
-#[allow(clippy::needless_range_loop)]
+///
+/// With `A` the `(a, d)` block of `JᵀJ`, `B` its coupling to the nonlinear parameters and `C`
+/// their block, the gradient in `(a, d)` vanishes at the projected values, so the full
+/// Gauss–Newton step in the nonlinear parameters is `−S⁻¹ g` with the Schur complement
+/// `S = C − Bᵀ A⁻¹ B` (1×1 or 2×2, solved in closed form), and `(S⁻¹)_pp` is the position's
+/// entry of `(JᵀJ)⁻¹`.
 #[inline]
-fn project<const K: usize>(y: &[f64], yy: f64, p: f64, c: f64) -> Option<Projected<K>> {
-    let (m, v) = basis_sums::<K>(y, p, c)?;
+fn project<const K: usize>(y: &[f64], yy: f64, p: f64, w: &Width) -> Option<Projected> {
+    let (m, v) = basis_sums::<K>(y, p, w)?;
     let det = m[0][0] * m[1][1] - m[0][1] * m[0][1];
     // det = n² var(σ): relative to n Σσ², it vanishes when σ is constant over the window.
     if !(det > 1e-12 * m[0][0] * m[1][1]) {
@@ -334,31 +365,56 @@ fn project<const K: usize>(y: &[f64], yy: f64, p: f64, c: f64) -> Option<Project
     let d = (m[0][0] * v[1] - m[0][1] * v[0]) / det;
     // At the projected (a, d) the residual is orthogonal to σ and 1: rss = Σy² − a Σσy − d Σy.
     let rss = (yy - a * v[0] - d * v[1]).max(0.0);
-    let scale = [1.0, 1.0, a, a];
-    let mut jtj = [[0.0; K]; K];
-    let mut neg_jtr = [0.0; K];
-    for j in 0..K {
-        neg_jtr[j] = -scale[j] * (a * m[j][0] + d * m[j][1] - v[j]);
-        for l in 0..K {
-            jtj[j][l] = scale[j] * scale[l] * m[j][l];
+    // The Jacobian columns of p and c are a·w₂, a·w₃.
+    let mut s = [[0.0; 2]; 2];
+    let mut g = [0.0; 2];
+    for j in 2..K {
+        for l in 2..K {
+            let b_a_b = (m[1][1] * m[0][j] * m[0][l]
+                - m[0][1] * (m[0][j] * m[1][l] + m[1][j] * m[0][l])
+                + m[0][0] * m[1][j] * m[1][l])
+                / det;
+            s[j - 2][l - 2] = a * a * (m[j][l] - b_a_b);
         }
+        g[j - 2] = a * (a * m[j][0] + d * m[j][1] - v[j]);
     }
-    let step = cholesky_solve(&jtj, &neg_jtr)?;
+    let (step, var_p) = if K == 3 {
+        if !(s[0][0] > 0.0) {
+            return None;
+        }
+        ([-g[0] / s[0][0], 0.0], 1.0 / s[0][0])
+    } else {
+        let det_s = s[0][0] * s[1][1] - s[0][1] * s[0][1];
+        if !(s[0][0] > 0.0 && det_s > 0.0) {
+            return None;
+        }
+        let inv = [
+            [s[1][1] / det_s, -s[0][1] / det_s],
+            [-s[0][1] / det_s, s[0][0] / det_s],
+        ];
+        (
+            [
+                -(inv[0][0] * g[0] + inv[0][1] * g[1]),
+                -(inv[1][0] * g[0] + inv[1][1] * g[1]),
+            ],
+            inv[0][0],
+        )
+    };
     Some(Projected {
         a,
         d,
         rss,
-        jtj,
         step,
+        var_p,
     })
 }
 
 /// Least squares over the first `K` of `[a, d, p, c]` (normalized intensities; with `K = 3` the
-/// width is `c0`; `yy = Σ yᵢ²`) by variable projection (Golub–Pereyra, with Kaufman's Gauss–Newton step): the
-/// model is linear in `(a, d)`, which are solved in closed form at every `(p, c)`, so the
-/// iteration runs on the one or two nonlinear parameters only and needs no start for `(a, d)`.
-/// Each pass over the samples yields the projected fit and the next step; a step that does not
-/// lower the residual is halved. Stops when the next step moves `p` and `c` by less than
+/// width is `c0`; `yy = Σ yᵢ²`) by variable projection (Golub–Pereyra, with Kaufman's
+/// Gauss–Newton step): the model is linear in `(a, d)`, which are solved in closed form at every
+/// `(p, c)`, so the iteration runs on the one or two nonlinear parameters only and needs no start
+/// for `(a, d)`. Each pass over the samples yields the projected fit and the next step; a step that
+/// does not lower the residual is halved. Stops when the next step moves `p` and `c` by less than
 /// [`STEP_TOLERANCE`] (applied without another pass), or at `params.max_iterations` passes.
 fn variable_projection<const K: usize>(
     y: &[f64],
@@ -368,55 +424,54 @@ fn variable_projection<const K: usize>(
     params: &SigmoidParams,
 ) -> Option<([f64; 4], Convergence)> {
     let n = y.len();
-    let (mut p, mut c) = (p0, c0);
-    let mut cur = project::<K>(y, yy, p, c)?;
+    let (mut p, mut width) = (p0, Width::new(c0)?);
+    let mut cur = project::<K>(y, yy, p, &width)?;
     let mut iterations = 1;
     loop {
         // Far from the edge the logistic's flat tails make Gauss–Newton overshoot: bound the
         // step to a quarter window in p and to a factor 2 either way in c.
-        let half_window = n as f64 / 4.0;
-        let dp = cur.step[2].clamp(-half_window, half_window);
-        let dc = if K == 4 {
-            cur.step[K - 1].clamp(-0.5 * c, c)
-        } else {
-            0.0
-        };
+        let quarter = n as f64 / 4.0;
+        let c = width.c;
+        let dp = cur.step[0].clamp(-quarter, quarter);
+        let dc = cur.step[1].clamp(-0.5 * c, c);
         if dp.abs() < STEP_TOLERANCE && dc.abs() < STEP_TOLERANCE {
             // Convergence is quadratic on the small residuals of an edge profile: this last step
             // leaves an error far below it, and (a, d, rss) move by O(step) only.
             p += dp;
-            c += dc;
+            width.c += dc;
             break;
         }
         let mut t = 1.0;
         let mut accepted = None;
         while iterations < params.max_iterations && t > 1e-3 {
             iterations += 1;
-            match project::<K>(y, yy, p + t * dp, c + t * dc) {
-                Some(trial) if trial.rss <= cur.rss => {
-                    accepted = Some(trial);
+            let trial_width = if K == 4 {
+                Width::new(c + t * dc)
+            } else {
+                Some(width)
+            };
+            match trial_width.and_then(|tw| Some((project::<K>(y, yy, p + t * dp, &tw)?, tw))) {
+                Some((trial, tw)) if trial.rss <= cur.rss => {
+                    accepted = Some((trial, tw));
                     break;
                 }
                 _ => t *= 0.5,
             }
         }
-        let Some(next) = accepted else {
+        let Some((next, next_width)) = accepted else {
             // No descent left at this precision (or out of passes): at the minimum.
             break;
         };
         p += t * dp;
-        c += t * dc;
+        width = next_width;
         cur = next;
     }
-    let mut e_p = [0.0; K];
-    e_p[2] = 1.0;
-    let var_p = cholesky_solve(&cur.jtj, &e_p).map_or(f64::INFINITY, |x| x[2]);
     let s2 = cur.rss / (n - K) as f64;
     Some((
-        [cur.a, cur.d, p, c],
+        [cur.a, cur.d, p, width.c],
         Convergence {
             rss: cur.rss,
-            position_sigma: (s2 * var_p).max(0.0).sqrt(),
+            position_sigma: (s2 * cur.var_p).max(0.0).sqrt(),
             iterations,
         },
     ))
@@ -425,44 +480,6 @@ fn variable_projection<const K: usize>(
 /// Step (samples) in `p` and `c` below which [`variable_projection`] stops: well below the noise
 /// of any sample and below the logistic-vs-erf model error.
 const STEP_TOLERANCE: f64 = 3e-3;
-
-/// Solves `m x = b` for symmetric positive definite `m` by Cholesky; `None` if not positive definite.
-#[allow(clippy::needless_range_loop)]
-#[inline]
-fn cholesky_solve<const K: usize>(m: &[[f64; K]; K], b: &[f64; K]) -> Option<[f64; K]> {
-    let mut l = [[0.0; K]; K];
-    for j in 0..K {
-        let mut s = m[j][j];
-        for k in 0..j {
-            s -= l[j][k] * l[j][k];
-        }
-        if s.is_nan() || s <= 0.0 {
-            return None;
-        }
-        l[j][j] = s.sqrt();
-        for i in j + 1..K {
-            let mut s = m[i][j];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
-            l[i][j] = s / l[j][j];
-        }
-    }
-    let mut x = *b;
-    for i in 0..K {
-        for k in 0..i {
-            x[i] -= l[i][k] * x[k];
-        }
-        x[i] /= l[i][i];
-    }
-    for i in (0..K).rev() {
-        for k in i + 1..K {
-            x[i] -= l[k][i] * x[k];
-        }
-        x[i] /= l[i][i];
-    }
-    Some(x)
-}
 
 /// Which pixel scanline an [`EdgeSample`] was fitted on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
