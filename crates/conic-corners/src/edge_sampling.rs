@@ -358,15 +358,16 @@ fn project<const K: usize>(y: &[f64], yy: f64, p: f64, w: &Width) -> Option<Proj
     let (m, v) = basis_sums::<K>(y, p, w)?;
     let det = m[0][0] * m[1][1] - m[0][1] * m[0][1];
     // det = n² var(σ): relative to n Σσ², it vanishes when σ is constant over the window.
-    if !(det > 1e-12 * m[0][0] * m[1][1]) {
+    if !(det > 1e-12 * m[0][0] * m[1][1] && det.is_finite()) {
         return None;
     }
     let a = (m[1][1] * v[0] - m[0][1] * v[1]) / det;
     let d = (m[0][0] * v[1] - m[0][1] * v[0]) / det;
     // At the projected (a, d) the residual is orthogonal to σ and 1: rss = Σy² − a Σσy − d Σy.
     let rss = (yy - a * v[0] - d * v[1]).max(0.0);
-    // The Jacobian columns of p and c are a·w₂, a·w₃.
-    let mut s = [[0.0; 2]; 2];
+    // The Jacobian columns of p and c are a·w₂, a·w₃. A fixed width leaves S = diag(s_pp, 1) and
+    // g_c = 0, so one 2×2 solve serves both cases.
+    let mut s = [[0.0, 0.0], [0.0, 1.0]];
     let mut g = [0.0; 2];
     for j in 2..K {
         for l in 2..K {
@@ -378,28 +379,19 @@ fn project<const K: usize>(y: &[f64], yy: f64, p: f64, w: &Width) -> Option<Proj
         }
         g[j - 2] = a * (a * m[j][0] + d * m[j][1] - v[j]);
     }
-    let (step, var_p) = if K == 3 {
-        if !(s[0][0] > 0.0) {
-            return None;
-        }
-        ([-g[0] / s[0][0], 0.0], 1.0 / s[0][0])
-    } else {
-        let det_s = s[0][0] * s[1][1] - s[0][1] * s[0][1];
-        if !(s[0][0] > 0.0 && det_s > 0.0) {
-            return None;
-        }
-        let inv = [
-            [s[1][1] / det_s, -s[0][1] / det_s],
-            [-s[0][1] / det_s, s[0][0] / det_s],
-        ];
-        (
-            [
-                -(inv[0][0] * g[0] + inv[0][1] * g[1]),
-                -(inv[1][0] * g[0] + inv[1][1] * g[1]),
-            ],
-            inv[0][0],
-        )
-    };
+    let det_s = s[0][0] * s[1][1] - s[0][1] * s[0][1];
+    if !(s[0][0] > 0.0 && det_s > 0.0) {
+        return None;
+    }
+    let inv = [
+        [s[1][1] / det_s, -s[0][1] / det_s],
+        [-s[0][1] / det_s, s[0][0] / det_s],
+    ];
+    let step = [
+        -(inv[0][0] * g[0] + inv[0][1] * g[1]),
+        -(inv[1][0] * g[0] + inv[1][1] * g[1]),
+    ];
+    let var_p = inv[0][0];
     Some(Projected {
         a,
         d,

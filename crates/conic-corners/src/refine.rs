@@ -150,10 +150,12 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     // Pilot: short walks with a generous window measure the blur and a first corner. Each
     // direction estimate is tried in turn until one gives a pilot solution.
     let pilot_sigma = params.blur.unwrap_or(2.0);
+    // Every second scanline is plenty for a first corner and the directions; the blur estimate
+    // picks its own profiles.
     let pilot = WalkConfig::pilot(
         pilot_sigma,
         params.reach.min(20.0 + 6.0 * pilot_sigma),
-        params.stride,
+        params.stride.max(2),
     );
     let mut found = None;
     for directions in direction_candidates(image, start) {
