@@ -267,6 +267,68 @@ impl Width {
     }
 }
 
+/// Running sums of [`basis_sums`] (`s` for σ, `g`, `h = g u`, `y`; `ss` = Σσ², `sgy` = Σ g y, …).
+#[derive(Default)]
+struct Sums {
+    s: f64,
+    ss: f64,
+    sy: f64,
+    yt: f64,
+    sg: f64,
+    ssg: f64,
+    sgg: f64,
+    sgy: f64,
+    sh: f64,
+    ssh: f64,
+    sgh: f64,
+    shh: f64,
+    shy: f64,
+}
+
+impl Sums {
+    /// Adds sample `y` at `u = (i − p)/c` with `e = e^{−u}` (the `h` sums only for `K = 4`).
+    #[inline(always)]
+    fn add<const K: usize>(&mut self, y: f64, e: f64, u: f64, inv_c: f64) {
+        let sig = 1.0 / (1.0 + e);
+        // σ(1 − σ) = e σ², and stays exact where 1 − σ would cancel.
+        let g = e * sig * sig * inv_c;
+        self.s += sig;
+        self.ss += sig * sig;
+        self.sy += sig * y;
+        self.yt += y;
+        self.sg += g;
+        self.ssg += sig * g;
+        self.sgg += g * g;
+        self.sgy += g * y;
+        if K == 4 {
+            let h = g * u;
+            self.sh += h;
+            self.ssh += sig * h;
+            self.sgh += g * h;
+            self.shh += h * h;
+            self.shy += h * y;
+        }
+    }
+
+    fn merged(&self, o: &Self) -> Self {
+        Self {
+            s: self.s + o.s,
+            ss: self.ss + o.ss,
+            sy: self.sy + o.sy,
+            yt: self.yt + o.yt,
+            sg: self.sg + o.sg,
+            ssg: self.ssg + o.ssg,
+            sgg: self.sgg + o.sgg,
+            sgy: self.sgy + o.sgy,
+            sh: self.sh + o.sh,
+            ssh: self.ssh + o.ssh,
+            sgh: self.sgh + o.sgh,
+            shh: self.shh + o.shh,
+            shy: self.shy + o.shy,
+        }
+    }
+}
+
 /// Sums over the samples of the basis `w_i = [σ_i, 1, −g_i, −g_i u_i]` (first `K` entries) at
 /// position `p` and width `c`, with `u_i = (i − p)/c`, `σ_i = 1/(1 + e^{−u_i})` and
 /// `g_i = σ_i (1 − σ_i)/c`: returns `Σ w wᵀ` and `Σ w yᵢ`. The model's Jacobian row over
@@ -284,39 +346,35 @@ fn basis_sums<const K: usize>(y: &[f64], p: f64, w: &Width) -> Option<([[f64; K]
     // cannot occur because the start is 0 or ∞ only when no samples lie on the far side.
     let n = y.len();
     let i0 = p.round().clamp(0.0, (n - 1) as f64) as usize;
-    let mut e = [0.0f64; MAX_SAMPLES];
-    e[i0] = (-(i0 as f64 - p) * inv_c).exp();
-    for i in i0 + 1..n {
-        e[i] = e[i - 1] * w.up;
+    // Each direction accumulates into its own sums, computing e on the fly: the multiply chain
+    // then hides behind the loop body, and the two loops carry independent dependency chains.
+    let e0 = (-(i0 as f64 - p) * inv_c).exp();
+    let (mut fwd, mut bwd) = (Sums::default(), Sums::default());
+    let mut e = e0;
+    for (i, &yi) in y.iter().enumerate().skip(i0) {
+        fwd.add::<K>(yi, e, (i as f64 - p) * inv_c, inv_c);
+        e *= w.up;
     }
-    for i in (0..i0).rev() {
-        e[i] = e[i + 1] * w.down;
+    e = e0;
+    for (i, &yi) in y[..i0].iter().enumerate().rev() {
+        e *= w.down;
+        bwd.add::<K>(yi, e, (i as f64 - p) * inv_c, inv_c);
     }
-    // Plain scalar accumulators (w₁ = 1 needs none): the loop then has no array indexing.
-    let (mut s, mut ss, mut sy, mut yt) = (0.0, 0.0, 0.0, 0.0);
-    let (mut sg, mut ssg, mut sgg, mut sgy) = (0.0, 0.0, 0.0, 0.0);
-    let (mut sh, mut ssh, mut sgh, mut shh, mut shy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (i, (&yi, &ei)) in y.iter().zip(&e[..n]).enumerate() {
-        let sig = 1.0 / (1.0 + ei);
-        // σ(1 − σ) = e σ², and stays exact where 1 − σ would cancel.
-        let g = ei * sig * sig * inv_c;
-        s += sig;
-        ss += sig * sig;
-        sy += sig * yi;
-        yt += yi;
-        sg += g;
-        ssg += sig * g;
-        sgg += g * g;
-        sgy += g * yi;
-        if K == 4 {
-            let h = g * (i as f64 - p) * inv_c;
-            sh += h;
-            ssh += sig * h;
-            sgh += g * h;
-            shh += h * h;
-            shy += h * yi;
-        }
-    }
+    let Sums {
+        s,
+        ss,
+        sy,
+        yt,
+        sg,
+        ssg,
+        sgg,
+        sgy,
+        sh,
+        ssh,
+        sgh,
+        shh,
+        shy,
+    } = fwd.merged(&bwd);
     // Entries of Σ w wᵀ and Σ w y for w = [σ, 1, −g, −h], h = g u.
     let full_m = [
         [ss, s, -ssg, -ssh],
