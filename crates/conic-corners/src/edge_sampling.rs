@@ -125,6 +125,17 @@ pub fn fit_sigmoid_with(
     fixed_width: Option<f32>,
     params: &SigmoidParams,
 ) -> Option<SigmoidFit> {
+    fit_sigmoid_from(profile, fixed_width, params, None)
+}
+
+/// [`fit_sigmoid_with`] started from `start = (p, c)` when given (a previous fit of the same edge)
+/// instead of from the profile's steepest mid-level crossing.
+fn fit_sigmoid_from(
+    profile: &[f32],
+    fixed_width: Option<f32>,
+    params: &SigmoidParams,
+    start: Option<(f64, f64)>,
+) -> Option<SigmoidFit> {
     let n = profile.len();
     if !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) {
         return None;
@@ -155,7 +166,10 @@ pub fn fit_sigmoid_with(
     }
     let y = &y[..n];
 
-    let (p0, c0) = start_values(y)?;
+    let (p0, c0) = match start {
+        Some(guess) => guess,
+        None => start_values(y)?,
+    };
     let (theta, fit) = match fixed_width {
         Some(c) => {
             let c = c as f64;
@@ -646,8 +660,7 @@ pub fn sample_edge_with(
         fixed,
         cross.round(),
         half_width,
-        fixed_width,
-        params,
+        |profile| fit_sigmoid_with(profile, fixed_width, params),
     )?;
     // The logistic is not the exact profile, so a window off-centre from the edge biases the
     // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window.
@@ -659,8 +672,11 @@ pub fn sample_edge_with(
             fixed,
             found.round(),
             half_width,
-            fixed_width,
-            params,
+            |profile| {
+                // The same edge, in the shifted window's coordinates.
+                let p = found - (found.round() - half_width as f64);
+                fit_sigmoid_from(profile, fixed_width, params, Some((p, first.1.width)))
+            },
         )?
     } else {
         first
@@ -674,15 +690,15 @@ pub fn sample_edge_with(
 }
 
 /// Fits the `2h + 1` pixels of the row (`Axis::X`, `y = fixed`) or column (`Axis::Y`, `x = fixed`)
-/// centred on pixel `centre` of the scanline; returns the first pixel's coordinate and the fit.
+/// centred on pixel `centre` of the scanline with `fit`; returns the first pixel's coordinate and
+/// the fit.
 fn scanline_fit(
     image: &GrayImage,
     axis: Axis,
     fixed: f64,
     centre: f64,
     half_width: usize,
-    fixed_width: Option<f32>,
-    params: &SigmoidParams,
+    fit: impl FnOnce(&[f32]) -> Option<SigmoidFit>,
 ) -> Option<(f64, SigmoidFit)> {
     let (len_fixed, len_scan) = match axis {
         Axis::X => (image.height(), image.width()),
@@ -706,7 +722,7 @@ fn scanline_fit(
             &column[..n]
         }
     };
-    Some((first, fit_sigmoid_with(profile, fixed_width, params)?))
+    Some((first, fit(profile)?))
 }
 
 /// The point `stride` scanlines on from `anchor` along an edge of direction `d` (not necessarily
