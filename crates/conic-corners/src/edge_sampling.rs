@@ -1,4 +1,4 @@
-//! Subpixel edge sampling (paper III-D): a logistic sigmoid (eq. 6) fitted by Levenberg–Marquardt to
+//! Subpixel edge sampling (paper III-D): a logistic sigmoid (eq. 6) fitted by least squares to
 //! the raw pixels of the image row or column that crosses an edge most steeply.
 //!
 //! The model for a profile `y_i` sampled at `s = i` is
@@ -58,7 +58,7 @@ pub struct SigmoidFit {
     /// `s² (JᵀJ)⁻¹` with `s² = Σ rᵢ² / (n − k)` (k fitted parameters): a weight for later fits.
     /// Near zero on noise-free data, where the model error dominates instead.
     pub position_sigma: f64,
-    /// Levenberg–Marquardt iterations used (accepted and rejected steps).
+    /// Passes over the samples used by the Gauss–Newton iteration (accepted and rejected steps).
     pub iterations: u32,
 }
 
@@ -111,11 +111,12 @@ pub fn fit_sigmoid(profile: &[f32], fixed_width: Option<f32>) -> Option<SigmoidF
 /// otherwise all four. A fixed `c` that does not match the profile biases `p` by a few hundredths of
 /// a pixel, so the final measurement should leave `c` free.
 ///
-/// Start values: `d`, `a` from the means of the first and last `n/6` samples (the sign of `a` is the
-/// polarity), `p` from the mid-level crossing nearest the steepest central difference (linear
-/// interpolation), `c = |a| / (4 · max slope)`. The fit runs in normalized intensities (so it is
-/// invariant to affine intensity changes) and solves the damped 4×4 normal equations
-/// `(JᵀJ + λ diag JᵀJ) δ = −Jᵀr` by Cholesky, with no heap allocation.
+/// Start values: the polarity from the means of the first and last `n/6` samples, `p` from the
+/// mid-level crossing nearest the steepest central difference (linear interpolation),
+/// `c = |a| / (4 · max slope)`. The model is linear in `a` and `d`, so they are solved in closed
+/// form at every `(p, c)` (variable projection) and Gauss–Newton runs on `p` (and `c`) alone:
+/// typically 2–3 passes over the samples, no heap allocation, and invariant to affine intensity
+/// changes.
 ///
 /// Returns `None` for fewer than [`MIN_SAMPLES`] or more than [`MAX_SAMPLES`] samples, non-finite
 /// samples or `fixed_width`, a flat profile, or a fit rejected by `params` (low contrast-to-noise,
@@ -140,31 +141,24 @@ fn fit_sigmoid_from(
     if !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) {
         return None;
     }
-    // f32 comparisons that a NaN fails, so one branch-free pass finds the range and any
-    // non-finite sample (which makes the range non-finite).
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let mut finite = true;
-    for &v in profile {
-        finite &= v.is_finite();
-        lo = if v < lo { v } else { lo };
-        hi = if v > hi { v } else { hi };
-    }
-    let (lo, hi) = (lo as f64, hi as f64);
-    let range = hi - lo;
-    if !(finite && range > 0.0) {
-        // Non-finite samples, or a flat profile.
-        return None;
-    }
-    let inv_range = 1.0 / range;
+    // Relative to the first sample, so that a large offset does not cancel in the sums; no
+    // scaling is needed since the projected fit is invariant to the intensity scale. A non-finite
+    // sample makes Σy² non-finite, a flat profile makes the total sum of squares zero.
+    let reference = profile[0] as f64;
     let mut y = [0.0f64; MAX_SAMPLES];
     let (mut sum, mut sum_sq) = (0.0, 0.0);
     for (dst, &v) in y.iter_mut().zip(profile) {
-        let t = (v as f64 - lo) * inv_range;
+        let t = v as f64 - reference;
         *dst = t;
         sum += t;
         sum_sq += t * t;
     }
     let y = &y[..n];
+    let nf = n as f64;
+    let tss = sum_sq - sum * sum / nf;
+    if !(sum_sq.is_finite() && tss > 0.0) {
+        return None;
+    }
 
     let (p0, c0) = match start {
         Some(guess) => guess,
@@ -181,7 +175,6 @@ fn fit_sigmoid_from(
         None => variable_projection::<4>(y, sum_sq, p0, c0, params)?,
     };
     let [a, d, p, c] = theta;
-    let nf = n as f64;
     let rms = (fit.rss / nf).sqrt();
     let ok = theta.iter().all(|v| v.is_finite())
         && c >= params.min_width
@@ -192,20 +185,19 @@ fn fit_sigmoid_from(
     if !ok {
         return None;
     }
-    let tss = sum_sq - sum * sum / nf;
     Some(SigmoidFit {
         position: p,
-        amplitude: a * range,
-        offset: d * range + lo,
+        amplitude: a,
+        offset: d + reference,
         width: c,
-        rms: rms * range,
+        rms,
         r_squared: 1.0 - fit.rss / tss,
         position_sigma: fit.position_sigma,
         iterations: fit.iterations,
     })
 }
 
-/// Start values `(p, c)` from normalized intensities, or `None` for a profile with no discernible
+/// Start values `(p, c)` (any intensity scale), or `None` for a profile with no discernible
 /// slope.
 fn start_values(y: &[f64]) -> Option<(f64, f64)> {
     let n = y.len();
@@ -473,7 +465,7 @@ fn project<const K: usize>(y: &[f64], yy: f64, p: f64, w: &Width) -> Option<Proj
     })
 }
 
-/// Least squares over the first `K` of `[a, d, p, c]` (normalized intensities; with `K = 3` the
+/// Least squares over the first `K` of `[a, d, p, c]` (intensities relative to the first sample; with `K = 3` the
 /// width is `c0`; `yy = Σ yᵢ²`) by variable projection (Golub–Pereyra, with Kaufman's
 /// Gauss–Newton step): the model is linear in `(a, d)`, which are solved in closed form at every
 /// `(p, c)`, so the iteration runs on the one or two nonlinear parameters only and needs no start
@@ -654,30 +646,18 @@ pub fn sample_edge_with(
             (x0, point[1] + ty / tx * (x0 - point[0]))
         }
     };
-    let first = scanline_fit(
-        image,
-        axis,
-        fixed,
-        cross.round(),
-        half_width,
-        |profile| fit_sigmoid_with(profile, fixed_width, params),
-    )?;
+    let first = scanline_fit(image, axis, fixed, cross.round(), half_width, |profile| {
+        fit_sigmoid_with(profile, fixed_width, params)
+    })?;
     // The logistic is not the exact profile, so a window off-centre from the edge biases the
     // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window.
     let found = first.0 + first.1.position;
     let (start, fit) = if found.round() != cross.round() {
-        scanline_fit(
-            image,
-            axis,
-            fixed,
-            found.round(),
-            half_width,
-            |profile| {
-                // The same edge, in the shifted window's coordinates.
-                let p = found - (found.round() - half_width as f64);
-                fit_sigmoid_from(profile, fixed_width, params, Some((p, first.1.width)))
-            },
-        )?
+        scanline_fit(image, axis, fixed, found.round(), half_width, |profile| {
+            // The same edge, in the shifted window's coordinates.
+            let p = found - (found.round() - half_width as f64);
+            fit_sigmoid_from(profile, fixed_width, params, Some((p, first.1.width)))
+        })?
     } else {
         first
     };
