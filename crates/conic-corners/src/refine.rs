@@ -227,15 +227,19 @@ const RING_STEPS: usize = 180;
 /// [`direction_candidates`].
 fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 4]> {
     let mut ring = [0f32; RING_STEPS];
-    for (i, v) in ring.iter_mut().enumerate() {
-        let a = i as f64 * std::f64::consts::TAU / RING_STEPS as f64;
-        let (c, s) = (a.cos(), a.sin());
+    // The unit vector turns by a fixed rotation per step (no trigonometry per step; the rounding
+    // drift over one turn is ~1e-14).
+    let step = std::f64::consts::TAU / RING_STEPS as f64;
+    let (rot_c, rot_s) = (step.cos(), step.sin());
+    let (mut c, mut s) = (1.0f64, 0.0f64);
+    for v in ring.iter_mut() {
         let mut acc = 0.0;
         for dr in [-1.5, -0.5, 0.5, 1.5] {
             let rr = r + dr;
             acc += image.bilinear((p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
         }
         *v = acc;
+        (c, s) = (c * rot_c - s * rot_s, s * rot_c + c * rot_s);
     }
     // Circular [1 2 3 2 1] smoothing (±4°).
     let mut smooth = [0f32; RING_STEPS];
@@ -660,9 +664,15 @@ fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2]
         sxy += dx * dy;
         syy += dy * dy;
     }
-    // Principal axis of the scatter matrix.
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let mut u = [theta.cos(), theta.sin()];
+    // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy): from
+    // (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
+    let r = (2.0 * sxy).hypot(sxx - syy);
+    let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
+    let (cos, sin) = (
+        (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
+        (0.5 * (1.0 - cos2)).max(0.0).sqrt(),
+    );
+    let mut u = [cos, if sxy < 0.0 { -sin } else { sin }];
     if u[0] * d[0] + u[1] * d[1] < 0.0 {
         u = [-u[0], -u[1]];
     }
