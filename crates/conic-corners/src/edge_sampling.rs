@@ -296,8 +296,8 @@ impl Sums {
     #[inline(always)]
     fn add<const K: usize>(&mut self, y: f64, e: f64, u: f64, inv_c: f64) {
         let sig = 1.0 / (1.0 + e);
-        // σ(1 − σ) = e σ², and stays exact where 1 − σ would cancel.
-        let g = e * sig * sig * inv_c;
+        // Not e σ²: e = ∞ (far beyond the edge at a tiny width) must give g = 0, not NaN.
+        let g = sig * (1.0 - sig) * inv_c;
         self.s += sig;
         self.ss += sig * sig;
         self.sy += sig * y;
@@ -352,19 +352,39 @@ fn basis_sums<const K: usize>(y: &[f64], p: f64, w: &Width) -> Option<([[f64; K]
     // cannot occur because the start is 0 or ∞ only when no samples lie on the far side.
     let n = y.len();
     let i0 = p.round().clamp(0.0, (n - 1) as f64) as usize;
-    // Each direction accumulates into its own sums, computing e on the fly: the multiply chain
-    // then hides behind the loop body, and the two loops carry independent dependency chains.
+    // Samples go alternately into two sums per direction, computing e on the fly: the multiply
+    // chain hides behind the loop body, and four independent accumulator chains keep the
+    // floating-point adders busy.
     let e0 = (-(i0 as f64 - p) * inv_c).exp();
-    let (mut fwd, mut bwd) = (Sums::default(), Sums::default());
-    let mut e = e0;
-    for (i, &yi) in y.iter().enumerate().skip(i0) {
-        fwd.add::<K>(yi, e, (i as f64 - p) * inv_c, inv_c);
-        e *= w.up;
+    let mut acc = [
+        Sums::default(),
+        Sums::default(),
+        Sums::default(),
+        Sums::default(),
+    ];
+    let (up2, down2) = (w.up * w.up, w.down * w.down);
+    let u = |i: usize| (i as f64 - p) * inv_c;
+    let (mut i, mut e) = (i0, e0);
+    while i + 1 < n {
+        let e1 = e * w.up;
+        acc[0].add::<K>(y[i], e, u(i), inv_c);
+        acc[1].add::<K>(y[i + 1], e1, u(i + 1), inv_c);
+        e *= up2;
+        i += 2;
     }
-    e = e0;
-    for (i, &yi) in y[..i0].iter().enumerate().rev() {
-        e *= w.down;
-        bwd.add::<K>(yi, e, (i as f64 - p) * inv_c, inv_c);
+    if i < n {
+        acc[0].add::<K>(y[i], e, u(i), inv_c);
+    }
+    let (mut i, mut e) = (i0, e0 * w.down);
+    while i >= 2 {
+        let e1 = e * w.down;
+        acc[2].add::<K>(y[i - 1], e, u(i - 1), inv_c);
+        acc[3].add::<K>(y[i - 2], e1, u(i - 2), inv_c);
+        e *= down2;
+        i -= 2;
+    }
+    if i == 1 {
+        acc[2].add::<K>(y[0], e, u(0), inv_c);
     }
     let Sums {
         s,
@@ -380,7 +400,7 @@ fn basis_sums<const K: usize>(y: &[f64], p: f64, w: &Width) -> Option<([[f64; K]
         sgh,
         shh,
         shy,
-    } = fwd.merged(&bwd);
+    } = acc[0].merged(&acc[1]).merged(&acc[2].merged(&acc[3]));
     // Entries of Σ w wᵀ and Σ w y for w = [σ, 1, −g, −h], h = g u.
     let full_m = [
         [ss, s, -ssg, -ssh],
@@ -971,6 +991,27 @@ mod tests {
         assert!(fit_sigmoid(&profile(6, 3.0, 1.0, 0.0, 1.0), None).is_none());
         assert!(fit_sigmoid(&profile(65, 32.0, 1.0, 0.0, 1.0), None).is_none());
         assert!(fit_sigmoid(&[], None).is_none());
+    }
+
+    #[test]
+    fn extreme_widths_and_far_edges_give_finite_fits_or_none() {
+        // Tiny widths drive e^{−u} to 0 and ∞ within the window; an edge outside the window puts
+        // the start of the geometric sequence at ∞. Neither may produce NaN.
+        let step: Vec<f32> = (0..25).map(|i| if i < 12 { 10.0 } else { 90.0 }).collect();
+        for c in [1e-3f32, 2e-3, 0.01, 0.05, 0.2] {
+            if let Some(f) = fit_sigmoid(&step, Some(c)) {
+                assert!(f.position.is_finite() && f.rms.is_finite(), "c={c}: {f:?}");
+                assert!((f.position - 11.5).abs() <= 0.5, "c={c}: {f:?}");
+            }
+        }
+        let free = fit_sigmoid(&step, None);
+        assert!(free.is_none_or(|f| f.position.is_finite() && (f.position - 11.5).abs() <= 0.5));
+        let far = profile(25, 60.0, 1.0, 0.0, 1.0);
+        assert!(fit_sigmoid(&far, Some(0.01)).is_none());
+        assert!(fit_sigmoid(&far, None).is_none());
+        // Equal projected sums on both sides: the closed-form step must not divide by zero.
+        let two_level: Vec<f32> = (0..25).map(|i| (i % 2) as f32).collect();
+        assert!(fit_sigmoid(&two_level, Some(1.0)).is_none_or(|f| f.position.is_finite()));
     }
 
     #[test]
