@@ -191,7 +191,9 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
 }
 
 fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
+    // Pixel-scale values: no overflow for hypot's slower scaling to guard against.
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// Candidate unit directions of the four rays, best first, each in angular order so that rays `k`
@@ -590,7 +592,7 @@ fn walk_ray(
             // Signed contrast across the ray's left normal (−d.y, d.x), whatever the scan axis.
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();
-            let off = (s.point[0] - q[0]).hypot(s.point[1] - q[1]);
+            let off = dist(s.point, q);
             let near = off
                 <= if out.len() < 6 {
                     0.35 * hw as f64
@@ -666,7 +668,7 @@ fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2]
     }
     // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy): from
     // (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
-    let r = (2.0 * sxy).hypot(sxx - syy);
+    let r = (4.0 * sxy * sxy + (sxx - syy) * (sxx - syy)).sqrt();
     let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
     let (cos, sin) = (
         (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
