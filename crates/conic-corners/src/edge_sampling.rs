@@ -1,4 +1,4 @@
-//! Subpixel edge sampling (paper III-D): a logistic sigmoid (eq. 6) fitted by Levenberg–Marquardt to
+//! Subpixel edge sampling (paper III-D): a logistic sigmoid (eq. 6) fitted by least squares to
 //! the raw pixels of the image row or column that crosses an edge most steeply.
 //!
 //! The model for a profile `y_i` sampled at `s = i` is
@@ -58,7 +58,7 @@ pub struct SigmoidFit {
     /// `s² (JᵀJ)⁻¹` with `s² = Σ rᵢ² / (n − k)` (k fitted parameters): a weight for later fits.
     /// Near zero on noise-free data, where the model error dominates instead.
     pub position_sigma: f64,
-    /// Levenberg–Marquardt iterations used (accepted and rejected steps).
+    /// Passes over the samples used by the Gauss–Newton iteration (accepted and rejected steps).
     pub iterations: u32,
 }
 
@@ -111,11 +111,12 @@ pub fn fit_sigmoid(profile: &[f32], fixed_width: Option<f32>) -> Option<SigmoidF
 /// otherwise all four. A fixed `c` that does not match the profile biases `p` by a few hundredths of
 /// a pixel, so the final measurement should leave `c` free.
 ///
-/// Start values: `d`, `a` from the means of the first and last `n/6` samples (the sign of `a` is the
-/// polarity), `p` from the mid-level crossing nearest the steepest central difference (linear
-/// interpolation), `c = |a| / (4 · max slope)`. The fit runs in normalized intensities (so it is
-/// invariant to affine intensity changes) and solves the damped 4×4 normal equations
-/// `(JᵀJ + λ diag JᵀJ) δ = −Jᵀr` by Cholesky, with no heap allocation.
+/// Start values: the polarity from the means of the first and last `n/6` samples, `p` from the
+/// mid-level crossing nearest the steepest central difference (linear interpolation),
+/// `c = |a| / (4 · max slope)`. The model is linear in `a` and `d`, so they are solved in closed
+/// form at every `(p, c)` (variable projection) and Gauss–Newton runs on `p` (and `c`) alone:
+/// typically 2–3 passes over the samples, no heap allocation, and invariant to affine intensity
+/// changes.
 ///
 /// Returns `None` for fewer than [`MIN_SAMPLES`] or more than [`MAX_SAMPLES`] samples, non-finite
 /// samples or `fixed_width`, a flat profile, or a fit rejected by `params` (low contrast-to-noise,
@@ -125,43 +126,55 @@ pub fn fit_sigmoid_with(
     fixed_width: Option<f32>,
     params: &SigmoidParams,
 ) -> Option<SigmoidFit> {
+    fit_sigmoid_from(profile, fixed_width, params, None)
+}
+
+/// [`fit_sigmoid_with`] started from `start = (p, c)` when given (a previous fit of the same edge)
+/// instead of from the profile's steepest mid-level crossing.
+fn fit_sigmoid_from(
+    profile: &[f32],
+    fixed_width: Option<f32>,
+    params: &SigmoidParams,
+    start: Option<(f64, f64)>,
+) -> Option<SigmoidFit> {
     let n = profile.len();
     if !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) {
         return None;
     }
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &v in profile {
-        if !v.is_finite() {
-            return None;
-        }
-        lo = lo.min(v as f64);
-        hi = hi.max(v as f64);
-    }
-    let range = hi - lo;
-    if range <= 0.0 {
-        // Flat profile (the samples are finite, so no NaN here).
-        return None;
-    }
+    // Relative to the first sample, so that a large offset does not cancel in the sums; no
+    // scaling is needed since the projected fit is invariant to the intensity scale. A non-finite
+    // sample makes Σy² non-finite, a flat profile makes the total sum of squares zero.
+    let reference = profile[0] as f64;
     let mut y = [0.0f64; MAX_SAMPLES];
+    let (mut sum, mut sum_sq) = (0.0, 0.0);
     for (dst, &v) in y.iter_mut().zip(profile) {
-        *dst = (v as f64 - lo) / range;
+        let t = v as f64 - reference;
+        *dst = t;
+        sum += t;
+        sum_sq += t * t;
     }
     let y = &y[..n];
+    let nf = n as f64;
+    let tss = sum_sq - sum * sum / nf;
+    if !(sum_sq.is_finite() && tss > 0.0) {
+        return None;
+    }
 
-    let start = start_values(y)?;
+    let (p0, c0) = match start {
+        Some(guess) => guess,
+        None => start_values(y)?,
+    };
     let (theta, fit) = match fixed_width {
         Some(c) => {
             let c = c as f64;
             if !(c.is_finite() && c > 0.0) {
                 return None;
             }
-            let (t, f) = levenberg_marquardt::<3>(y, [start[0], start[1], start[2]], c, params)?;
-            ([t[0], t[1], t[2], c], f)
+            variable_projection::<3>(y, sum_sq, p0, c, params)?
         }
-        None => levenberg_marquardt::<4>(y, start, 0.0, params)?,
+        None => variable_projection::<4>(y, sum_sq, p0, c0, params)?,
     };
     let [a, d, p, c] = theta;
-    let nf = n as f64;
     let rms = (fit.rss / nf).sqrt();
     let ok = theta.iter().all(|v| v.is_finite())
         && c >= params.min_width
@@ -172,23 +185,21 @@ pub fn fit_sigmoid_with(
     if !ok {
         return None;
     }
-    let mean = y.iter().sum::<f64>() / nf;
-    let tss: f64 = y.iter().map(|v| (v - mean) * (v - mean)).sum();
     Some(SigmoidFit {
         position: p,
-        amplitude: a * range,
-        offset: d * range + lo,
+        amplitude: a,
+        offset: d + reference,
         width: c,
-        rms: rms * range,
+        rms,
         r_squared: 1.0 - fit.rss / tss,
         position_sigma: fit.position_sigma,
         iterations: fit.iterations,
     })
 }
 
-/// Start values `[a, d, p, c]` in normalized intensities, or `None` for a profile with no
-/// discernible slope.
-fn start_values(y: &[f64]) -> Option<[f64; 4]> {
+/// Start values `(p, c)` (any intensity scale), or `None` for a profile with no discernible
+/// slope.
+fn start_values(y: &[f64]) -> Option<(f64, f64)> {
     let n = y.len();
     let k = (n / 6).max(2);
     let first = y[..k].iter().sum::<f64>() / k as f64;
@@ -225,177 +236,326 @@ fn start_values(y: &[f64]) -> Option<[f64; 4]> {
         }
     }
     let c = (a.abs() / (4.0 * gmax)).clamp(0.3, n as f64 / 4.0);
-    Some([a, first, p, c])
+    Some((p, c))
 }
 
-/// Convergence summary of [`levenberg_marquardt`].
-struct LmFit {
+/// Convergence summary of [`variable_projection`].
+struct Convergence {
     rss: f64,
     position_sigma: f64,
     iterations: u32,
 }
 
-/// Residual sum of squares, `JᵀJ` and `Jᵀr` of the model at `theta` (`[a, d, p, c]`, the first `K`
-/// of them free; with `K = 3` the width is `fixed_c`). Returns `None` if `c` is not positive or `p` not finite.
-// Index loops mirror the (triangular) matrix algebra more plainly than iterator chains.
-#[allow(clippy::needless_range_loop)]
+/// A logistic width `c` with the constants that every pass over the samples needs.
+#[derive(Clone, Copy)]
+struct Width {
+    c: f64,
+    inv_c: f64,
+    /// `e^{−1/c}` and `e^{1/c}`: the ratios of `e^{−u}` between neighbouring samples.
+    up: f64,
+    down: f64,
+}
+
+impl Width {
+    /// `None` unless `c` is finite and positive (1e-3 at least).
+    fn new(c: f64) -> Option<Self> {
+        if !(c > 1e-3 && c.is_finite()) {
+            return None;
+        }
+        let inv_c = 1.0 / c;
+        let up = (-inv_c).exp();
+        Some(Self {
+            c,
+            inv_c,
+            up,
+            down: 1.0 / up,
+        })
+    }
+}
+
+/// Running sums of [`basis_sums`] (`s` for σ, `g`, `h = g u`, `y`; `ss` = Σσ², `sgy` = Σ g y, …).
+#[derive(Default)]
+struct Sums {
+    s: f64,
+    ss: f64,
+    sy: f64,
+    yt: f64,
+    sg: f64,
+    ssg: f64,
+    sgg: f64,
+    sgy: f64,
+    sh: f64,
+    ssh: f64,
+    sgh: f64,
+    shh: f64,
+    shy: f64,
+}
+
+impl Sums {
+    /// Adds sample `y` at `u = (i − p)/c` with `e = e^{−u}` (the `h` sums only for `K = 4`).
+    #[inline(always)]
+    fn add<const K: usize>(&mut self, y: f64, e: f64, u: f64, inv_c: f64) {
+        let sig = 1.0 / (1.0 + e);
+        // Not e σ²: e = ∞ (far beyond the edge at a tiny width) must give g = 0, not NaN.
+        let g = sig * (1.0 - sig) * inv_c;
+        self.s += sig;
+        self.ss += sig * sig;
+        self.sy += sig * y;
+        self.yt += y;
+        self.sg += g;
+        self.ssg += sig * g;
+        self.sgg += g * g;
+        self.sgy += g * y;
+        if K == 4 {
+            let h = g * u;
+            self.sh += h;
+            self.ssh += sig * h;
+            self.sgh += g * h;
+            self.shh += h * h;
+            self.shy += h * y;
+        }
+    }
+
+    fn merged(&self, o: &Self) -> Self {
+        Self {
+            s: self.s + o.s,
+            ss: self.ss + o.ss,
+            sy: self.sy + o.sy,
+            yt: self.yt + o.yt,
+            sg: self.sg + o.sg,
+            ssg: self.ssg + o.ssg,
+            sgg: self.sgg + o.sgg,
+            sgy: self.sgy + o.sgy,
+            sh: self.sh + o.sh,
+            ssh: self.ssh + o.ssh,
+            sgh: self.sgh + o.sgh,
+            shh: self.shh + o.shh,
+            shy: self.shy + o.shy,
+        }
+    }
+}
+
+/// Sums over the samples of the basis `w_i = [σ_i, 1, −g_i, −g_i u_i]` (first `K` entries) at
+/// position `p` and width `c`, with `u_i = (i − p)/c`, `σ_i = 1/(1 + e^{−u_i})` and
+/// `g_i = σ_i (1 − σ_i)/c`: returns `Σ w wᵀ` and `Σ w yᵢ`. The model's Jacobian row over
+/// `[a, d, p, c]` is `w_i` with its last two entries scaled by `a`, so these sums give the normal
+/// equations for any `(a, d)` without another pass. `None` if `p` is not finite.
 #[inline]
-fn normal_equations<const K: usize>(
-    y: &[f64],
-    theta: &[f64; K],
-    fixed_c: f64,
-) -> Option<(f64, [[f64; K]; K], [f64; K])> {
-    let (a, d, p) = (theta[0], theta[1], theta[2]);
-    let c = if K == 4 { theta[3] } else { fixed_c };
-    if !(c > 1e-3 && p.is_finite()) {
+fn basis_sums<const K: usize>(y: &[f64], p: f64, w: &Width) -> Option<([[f64; K]; K], [f64; K])> {
+    if !p.is_finite() {
         return None;
     }
-    let inv_c = 1.0 / c;
-    let mut jtj = [[0.0; K]; K];
-    let mut jtr = [0.0; K];
-    let mut rss = 0.0;
-    let mut add = |i: usize, e: f64| {
-        // e = exp(−u): one exp per pass instead of one per sample (see below).
-        let u = (i as f64 - p) * inv_c;
-        let sig = 1.0 / (1.0 + e);
-        let g = a * sig * (1.0 - sig) * inv_c;
-        let r = a * sig + d - y[i];
-        let row = [sig, 1.0, -g, -g * u];
-        rss += r * r;
-        for j in 0..K {
-            jtr[j] += row[j] * r;
-            for l in 0..=j {
-                jtj[j][l] += row[j] * row[l];
-            }
-        }
-    };
+    let inv_c = w.inv_c;
     // exp(−(i − p)/c) is geometric in i: start at the sample nearest p, where it is finite and
     // non-zero (|i − p| ≤ ½ unless p is outside the window), and multiply outwards. Each factor
     // only drives the value monotonically to 0 or ∞, whose sigmoids are the right limits; 0·∞
     // cannot occur because the start is 0 or ∞ only when no samples lie on the far side.
     let n = y.len();
     let i0 = p.round().clamp(0.0, (n - 1) as f64) as usize;
+    // Samples go alternately into two sums per direction, computing e on the fly: the multiply
+    // chain hides behind the loop body, and four independent accumulator chains keep the
+    // floating-point adders busy.
     let e0 = (-(i0 as f64 - p) * inv_c).exp();
-    let (down, up) = (inv_c.exp(), (-inv_c).exp());
-    let mut e = e0;
-    for i in i0..n {
-        add(i, e);
-        e *= up;
+    let mut acc = [
+        Sums::default(),
+        Sums::default(),
+        Sums::default(),
+        Sums::default(),
+    ];
+    let (up2, down2) = (w.up * w.up, w.down * w.down);
+    let u = |i: usize| (i as f64 - p) * inv_c;
+    let (mut i, mut e) = (i0, e0);
+    while i + 1 < n {
+        let e1 = e * w.up;
+        acc[0].add::<K>(y[i], e, u(i), inv_c);
+        acc[1].add::<K>(y[i + 1], e1, u(i + 1), inv_c);
+        e *= up2;
+        i += 2;
     }
-    e = e0;
-    for i in (0..i0).rev() {
-        e *= down;
-        add(i, e);
+    if i < n {
+        acc[0].add::<K>(y[i], e, u(i), inv_c);
     }
-    for j in 0..K {
-        for l in j + 1..K {
-            jtj[j][l] = jtj[l][j];
-        }
+    let (mut i, mut e) = (i0, e0 * w.down);
+    while i >= 2 {
+        let e1 = e * w.down;
+        acc[2].add::<K>(y[i - 1], e, u(i - 1), inv_c);
+        acc[3].add::<K>(y[i - 2], e1, u(i - 2), inv_c);
+        e *= down2;
+        i -= 2;
     }
-    Some((rss, jtj, jtr))
+    if i == 1 {
+        acc[2].add::<K>(y[0], e, u(0), inv_c);
+    }
+    let Sums {
+        s,
+        ss,
+        sy,
+        yt,
+        sg,
+        ssg,
+        sgg,
+        sgy,
+        sh,
+        ssh,
+        sgh,
+        shh,
+        shy,
+    } = acc[0].merged(&acc[1]).merged(&acc[2].merged(&acc[3]));
+    // Entries of Σ w wᵀ and Σ w y for w = [σ, 1, −g, −h], h = g u.
+    let full_m = [
+        [ss, s, -ssg, -ssh],
+        [s, n as f64, -sg, -sh],
+        [-ssg, -sg, sgg, sgh],
+        [-ssh, -sh, sgh, shh],
+    ];
+    let full_v = [sy, yt, -sgy, -shy];
+    let mut m = [[0.0; K]; K];
+    let mut v = [0.0; K];
+    for (j, (row, vj)) in m.iter_mut().zip(v.iter_mut()).enumerate() {
+        row.copy_from_slice(&full_m[j][..K]);
+        *vj = full_v[j];
+    }
+    Some((m, v))
 }
 
-/// Solves `m x = b` for symmetric positive definite `m` by Cholesky; `None` if not positive definite.
-#[allow(clippy::needless_range_loop)]
+/// The fit at one `(p, c)` with the linear parameters `(a, d)` projected out.
+struct Projected {
+    a: f64,
+    d: f64,
+    rss: f64,
+    /// Gauss–Newton step in `(p, c)` (`c` entry 0 when the width is fixed).
+    step: [f64; 2],
+    /// `(JᵀJ)⁻¹` at `p`: the position's variance per unit residual variance.
+    var_p: f64,
+}
+
+/// Solves for the least-squares `(a, d)` at `(p, c)` and the Gauss–Newton step from there.
+/// `yy = Σ yᵢ²`. `None` when the basis is degenerate (no transition inside the window).
+///
+/// With `A` the `(a, d)` block of `JᵀJ`, `B` its coupling to the nonlinear parameters and `C`
+/// their block, the gradient in `(a, d)` vanishes at the projected values, so the full
+/// Gauss–Newton step in the nonlinear parameters is `−S⁻¹ g` with the Schur complement
+/// `S = C − Bᵀ A⁻¹ B` (1×1 or 2×2, solved in closed form), and `(S⁻¹)_pp` is the position's
+/// entry of `(JᵀJ)⁻¹`.
 #[inline]
-fn cholesky_solve<const K: usize>(m: &[[f64; K]; K], b: &[f64; K]) -> Option<[f64; K]> {
-    let mut l = [[0.0; K]; K];
-    for j in 0..K {
-        let mut s = m[j][j];
-        for k in 0..j {
-            s -= l[j][k] * l[j][k];
-        }
-        if s.is_nan() || s <= 0.0 {
-            return None;
-        }
-        l[j][j] = s.sqrt();
-        for i in j + 1..K {
-            let mut s = m[i][j];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
-            l[i][j] = s / l[j][j];
-        }
+fn project<const K: usize>(y: &[f64], yy: f64, p: f64, w: &Width) -> Option<Projected> {
+    let (m, v) = basis_sums::<K>(y, p, w)?;
+    let det = m[0][0] * m[1][1] - m[0][1] * m[0][1];
+    // det = n² var(σ): relative to n Σσ², it vanishes when σ is constant over the window.
+    if !(det > 1e-12 * m[0][0] * m[1][1] && det.is_finite()) {
+        return None;
     }
-    let mut x = *b;
-    for i in 0..K {
-        for k in 0..i {
-            x[i] -= l[i][k] * x[k];
+    let a = (m[1][1] * v[0] - m[0][1] * v[1]) / det;
+    let d = (m[0][0] * v[1] - m[0][1] * v[0]) / det;
+    // At the projected (a, d) the residual is orthogonal to σ and 1: rss = Σy² − a Σσy − d Σy.
+    let rss = (yy - a * v[0] - d * v[1]).max(0.0);
+    // The Jacobian columns of p and c are a·w₂, a·w₃. A fixed width leaves S = diag(s_pp, 1) and
+    // g_c = 0, so one 2×2 solve serves both cases.
+    let mut s = [[0.0, 0.0], [0.0, 1.0]];
+    let mut g = [0.0; 2];
+    for j in 2..K {
+        for l in 2..K {
+            let b_a_b = (m[1][1] * m[0][j] * m[0][l]
+                - m[0][1] * (m[0][j] * m[1][l] + m[1][j] * m[0][l])
+                + m[0][0] * m[1][j] * m[1][l])
+                / det;
+            s[j - 2][l - 2] = a * a * (m[j][l] - b_a_b);
         }
-        x[i] /= l[i][i];
+        g[j - 2] = a * (a * m[j][0] + d * m[j][1] - v[j]);
     }
-    for i in (0..K).rev() {
-        for k in i + 1..K {
-            x[i] -= l[k][i] * x[k];
-        }
-        x[i] /= l[i][i];
+    let det_s = s[0][0] * s[1][1] - s[0][1] * s[0][1];
+    if !(s[0][0] > 0.0 && det_s > 0.0) {
+        return None;
     }
-    Some(x)
+    let inv = [
+        [s[1][1] / det_s, -s[0][1] / det_s],
+        [-s[0][1] / det_s, s[0][0] / det_s],
+    ];
+    let step = [
+        -(inv[0][0] * g[0] + inv[0][1] * g[1]),
+        -(inv[1][0] * g[0] + inv[1][1] * g[1]),
+    ];
+    let var_p = inv[0][0];
+    Some(Projected {
+        a,
+        d,
+        rss,
+        step,
+        var_p,
+    })
 }
 
-/// Levenberg–Marquardt on the first `K` of `[a, d, p, c]` (normalized intensities). Every pass over
-/// the samples evaluates residuals and normal equations together, so an accepted step needs no
-/// second pass.
-fn levenberg_marquardt<const K: usize>(
+/// Least squares over the first `K` of `[a, d, p, c]` (intensities relative to the first sample; with `K = 3` the
+/// width is `c0`; `yy = Σ yᵢ²`) by variable projection (Golub–Pereyra, with Kaufman's
+/// Gauss–Newton step): the model is linear in `(a, d)`, which are solved in closed form at every
+/// `(p, c)`, so the iteration runs on the one or two nonlinear parameters only and needs no start
+/// for `(a, d)`. Each pass over the samples yields the projected fit and the next step; a step that
+/// does not lower the residual is halved. Stops when the next step moves `p` and `c` by less than
+/// [`STEP_TOLERANCE`] (applied without another pass), or at `params.max_iterations` passes.
+fn variable_projection<const K: usize>(
     y: &[f64],
-    mut theta: [f64; K],
-    fixed_c: f64,
+    yy: f64,
+    p0: f64,
+    c0: f64,
     params: &SigmoidParams,
-) -> Option<([f64; K], LmFit)> {
-    let (mut rss, mut jtj, mut jtr) = normal_equations::<K>(y, &theta, fixed_c)?;
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    while iterations < params.max_iterations {
-        iterations += 1;
-        let mut damped = jtj;
-        for (j, row) in damped.iter_mut().enumerate() {
-            row[j] += lambda * jtj[j][j].max(1e-12);
-        }
-        let neg_g = jtr.map(|v| -v);
-        let Some(step) = cholesky_solve(&damped, &neg_g) else {
-            lambda *= 10.0;
-            continue;
-        };
-        let mut trial = theta;
-        for (t, s) in trial.iter_mut().zip(&step) {
-            *t += s;
-        }
-        match normal_equations::<K>(y, &trial, fixed_c) {
-            Some((r, m, g)) if r < rss => {
-                let gain = rss - r;
-                (theta, rss, jtj, jtr) = (trial, r, m, g);
-                lambda = (lambda * 0.1).max(1e-12);
-                // Steps in p (and c) below 1e-4 samples (the next is far smaller: convergence is
-                // quadratic near the minimum, and 1e-4 is well below any sample's noise), or no
-                // measurable gain, mean convergence.
-                let small = step[2].abs() < 1e-4 && (K < 4 || step[K - 1].abs() < 1e-4);
-                if small || gain <= 1e-15 * rss.max(1e-300) {
-                    break;
-                }
-            }
-            _ => {
-                lambda *= 10.0;
-                if lambda > 1e8 {
-                    // No descent direction left at machine precision: at the minimum.
-                    break;
-                }
-            }
-        }
-    }
+) -> Option<([f64; 4], Convergence)> {
     let n = y.len();
-    let mut e_p = [0.0; K];
-    e_p[2] = 1.0;
-    let var_p = cholesky_solve(&jtj, &e_p).map_or(f64::INFINITY, |x| x[2]);
-    let s2 = rss / (n - K) as f64;
+    let (mut p, mut width) = (p0, Width::new(c0)?);
+    let mut cur = project::<K>(y, yy, p, &width)?;
+    let mut iterations = 1;
+    loop {
+        // Far from the edge the logistic's flat tails make Gauss–Newton overshoot: bound the
+        // step to a quarter window in p and to a factor 2 either way in c.
+        let quarter = n as f64 / 4.0;
+        let c = width.c;
+        let dp = cur.step[0].clamp(-quarter, quarter);
+        let dc = cur.step[1].clamp(-0.5 * c, c);
+        if dp.abs() < STEP_TOLERANCE && dc.abs() < STEP_TOLERANCE {
+            // Convergence is quadratic on the small residuals of an edge profile: this last step
+            // leaves an error far below it, and (a, d, rss) move by O(step) only.
+            p += dp;
+            width.c += dc;
+            break;
+        }
+        let mut t = 1.0;
+        let mut accepted = None;
+        while iterations < params.max_iterations && t > 1e-3 {
+            iterations += 1;
+            let trial_width = if K == 4 {
+                Width::new(c + t * dc)
+            } else {
+                Some(width)
+            };
+            match trial_width.and_then(|tw| Some((project::<K>(y, yy, p + t * dp, &tw)?, tw))) {
+                Some((trial, tw)) if trial.rss <= cur.rss => {
+                    accepted = Some((trial, tw));
+                    break;
+                }
+                _ => t *= 0.5,
+            }
+        }
+        let Some((next, next_width)) = accepted else {
+            // No descent left at this precision (or out of passes): at the minimum.
+            break;
+        };
+        p += t * dp;
+        width = next_width;
+        cur = next;
+    }
+    let s2 = cur.rss / (n - K) as f64;
     Some((
-        theta,
-        LmFit {
-            rss,
-            position_sigma: (s2 * var_p).max(0.0).sqrt(),
+        [cur.a, cur.d, p, width.c],
+        Convergence {
+            rss: cur.rss,
+            position_sigma: (s2 * cur.var_p).max(0.0).sqrt(),
             iterations,
         },
     ))
 }
+
+/// Step (samples) in `p` and `c` below which [`variable_projection`] stops: well below the noise
+/// of any sample and below the logistic-vs-erf model error.
+const STEP_TOLERANCE: f64 = 3e-3;
 
 /// Which pixel scanline an [`EdgeSample`] was fitted on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -506,28 +666,18 @@ pub fn sample_edge_with(
             (x0, point[1] + ty / tx * (x0 - point[0]))
         }
     };
-    let first = scanline_fit(
-        image,
-        axis,
-        fixed,
-        cross.round(),
-        half_width,
-        fixed_width,
-        params,
-    )?;
+    let first = scanline_fit(image, axis, fixed, cross.round(), half_width, |profile| {
+        fit_sigmoid_with(profile, fixed_width, params)
+    })?;
     // The logistic is not the exact profile, so a window off-centre from the edge biases the
     // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window.
     let found = first.0 + first.1.position;
     let (start, fit) = if found.round() != cross.round() {
-        scanline_fit(
-            image,
-            axis,
-            fixed,
-            found.round(),
-            half_width,
-            fixed_width,
-            params,
-        )?
+        scanline_fit(image, axis, fixed, found.round(), half_width, |profile| {
+            // The same edge, in the shifted window's coordinates.
+            let p = found - (found.round() - half_width as f64);
+            fit_sigmoid_from(profile, fixed_width, params, Some((p, first.1.width)))
+        })?
     } else {
         first
     };
@@ -540,15 +690,15 @@ pub fn sample_edge_with(
 }
 
 /// Fits the `2h + 1` pixels of the row (`Axis::X`, `y = fixed`) or column (`Axis::Y`, `x = fixed`)
-/// centred on pixel `centre` of the scanline; returns the first pixel's coordinate and the fit.
+/// centred on pixel `centre` of the scanline with `fit`; returns the first pixel's coordinate and
+/// the fit.
 fn scanline_fit(
     image: &GrayImage,
     axis: Axis,
     fixed: f64,
     centre: f64,
     half_width: usize,
-    fixed_width: Option<f32>,
-    params: &SigmoidParams,
+    fit: impl FnOnce(&[f32]) -> Option<SigmoidFit>,
 ) -> Option<(f64, SigmoidFit)> {
     let (len_fixed, len_scan) = match axis {
         Axis::X => (image.height(), image.width()),
@@ -572,7 +722,7 @@ fn scanline_fit(
             &column[..n]
         }
     };
-    Some((first, fit_sigmoid_with(profile, fixed_width, params)?))
+    Some((first, fit(profile)?))
 }
 
 /// The point `stride` scanlines on from `anchor` along an edge of direction `d` (not necessarily
@@ -841,6 +991,27 @@ mod tests {
         assert!(fit_sigmoid(&profile(6, 3.0, 1.0, 0.0, 1.0), None).is_none());
         assert!(fit_sigmoid(&profile(65, 32.0, 1.0, 0.0, 1.0), None).is_none());
         assert!(fit_sigmoid(&[], None).is_none());
+    }
+
+    #[test]
+    fn extreme_widths_and_far_edges_give_finite_fits_or_none() {
+        // Tiny widths drive e^{−u} to 0 and ∞ within the window; an edge outside the window puts
+        // the start of the geometric sequence at ∞. Neither may produce NaN.
+        let step: Vec<f32> = (0..25).map(|i| if i < 12 { 10.0 } else { 90.0 }).collect();
+        for c in [1e-3f32, 2e-3, 0.01, 0.05, 0.2] {
+            if let Some(f) = fit_sigmoid(&step, Some(c)) {
+                assert!(f.position.is_finite() && f.rms.is_finite(), "c={c}: {f:?}");
+                assert!((f.position - 11.5).abs() <= 0.5, "c={c}: {f:?}");
+            }
+        }
+        let free = fit_sigmoid(&step, None);
+        assert!(free.is_none_or(|f| f.position.is_finite() && (f.position - 11.5).abs() <= 0.5));
+        let far = profile(25, 60.0, 1.0, 0.0, 1.0);
+        assert!(fit_sigmoid(&far, Some(0.01)).is_none());
+        assert!(fit_sigmoid(&far, None).is_none());
+        // Equal projected sums on both sides: the closed-form step must not divide by zero.
+        let two_level: Vec<f32> = (0..25).map(|i| (i % 2) as f32).collect();
+        assert!(fit_sigmoid(&two_level, Some(1.0)).is_none_or(|f| f.position.is_finite()));
     }
 
     #[test]

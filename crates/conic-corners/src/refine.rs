@@ -150,10 +150,12 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
     // Pilot: short walks with a generous window measure the blur and a first corner. Each
     // direction estimate is tried in turn until one gives a pilot solution.
     let pilot_sigma = params.blur.unwrap_or(2.0);
+    // Every second scanline is plenty for a first corner and the directions; the blur estimate
+    // picks its own profiles.
     let pilot = WalkConfig::pilot(
         pilot_sigma,
         params.reach.min(20.0 + 6.0 * pilot_sigma),
-        params.stride,
+        params.stride.max(2),
     );
     let mut found = None;
     for directions in direction_candidates(image, start) {
@@ -189,7 +191,9 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
 }
 
 fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
+    // Pixel-scale values: no overflow for hypot's slower scaling to guard against.
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// Candidate unit directions of the four rays, best first, each in angular order so that rays `k`
@@ -225,15 +229,19 @@ const RING_STEPS: usize = 180;
 /// [`direction_candidates`].
 fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 4]> {
     let mut ring = [0f32; RING_STEPS];
-    for (i, v) in ring.iter_mut().enumerate() {
-        let a = i as f64 * std::f64::consts::TAU / RING_STEPS as f64;
-        let (c, s) = (a.cos(), a.sin());
+    // The unit vector turns by a fixed rotation per step (no trigonometry per step; the rounding
+    // drift over one turn is ~1e-14).
+    let step = std::f64::consts::TAU / RING_STEPS as f64;
+    let (rot_c, rot_s) = (step.cos(), step.sin());
+    let (mut c, mut s) = (1.0f64, 0.0f64);
+    for v in ring.iter_mut() {
         let mut acc = 0.0;
         for dr in [-1.5, -0.5, 0.5, 1.5] {
             let rr = r + dr;
             acc += image.bilinear((p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
         }
         *v = acc;
+        (c, s) = (c * rot_c - s * rot_s, s * rot_c + c * rot_s);
     }
     // Circular [1 2 3 2 1] smoothing (±4°).
     let mut smooth = [0f32; RING_STEPS];
@@ -584,7 +592,7 @@ fn walk_ray(
             // Signed contrast across the ray's left normal (−d.y, d.x), whatever the scan axis.
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();
-            let off = (s.point[0] - q[0]).hypot(s.point[1] - q[1]);
+            let off = dist(s.point, q);
             let near = off
                 <= if out.len() < 6 {
                     0.35 * hw as f64
@@ -658,9 +666,15 @@ fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2]
         sxy += dx * dy;
         syy += dy * dy;
     }
-    // Principal axis of the scatter matrix.
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let mut u = [theta.cos(), theta.sin()];
+    // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy): from
+    // (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
+    let r = (4.0 * sxy * sxy + (sxx - syy) * (sxx - syy)).sqrt();
+    let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
+    let (cos, sin) = (
+        (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
+        (0.5 * (1.0 - cos2)).max(0.0).sqrt(),
+    );
+    let mut u = [cos, if sxy < 0.0 { -sin } else { sin }];
     if u[0] * d[0] + u[1] * d[1] < 0.0 {
         u = [-u[0], -u[1]];
     }
