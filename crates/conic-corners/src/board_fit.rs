@@ -1643,26 +1643,4 @@ mod tests {
             );
         }
     }
-
-    #[test]
-    #[ignore]
-    fn diag_tmp() {
-        use crate::detect::{detect, DetectParams};
-        let path = std::env::var("IMG").unwrap();
-        let img = crate::image::GrayImage::open(&path).unwrap();
-        let mut p = DetectParams::default();
-        p.mode = crate::detect::RefineMode::Local;
-        let det = detect(&img, &p);
-        let b = &det.boards[0];
-        let fit = fit_board_with_curves(&img, b, &p.board_fit);
-        println!("blur {:.3}", fit.blur);
-        for l in &fit.lines {
-            print!("{:?} {} n {} off {:.3} pieces", l.kind, l.index, l.samples.len(), l.polarity_offset);
-            for sg in &l.segments { if let Some((_, m, rms, n)) = sg.fit { print!(" [{:?} {:?} rms {:.3} n {}]", sg.samples, m, rms, n); } else { print!(" [{:?} none]", sg.samples); } }
-            println!();
-        }
-        for (f, c) in fit.corners.iter().zip(&b.corners) {
-            println!("r{} c{} {:?} {:?} shift {:.3} sigma {:.3}", f.row, f.col, f.path, f.fallback, (f.x - c.x).hypot(f.y - c.y), f.sigma);
-        }
-    }
 }
