@@ -51,7 +51,7 @@ use crate::edge_sampling::{
     blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, SigmoidParams,
 };
 use crate::quadratic_form::{
-    fit_edge_curve_with, nearest_intersection, BranchGuard, Curve, EdgeModel,
+    edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve, EdgeModel,
 };
 use crate::segmentation::{segment_chain, SegmentationParams};
 use crate::GrayImage;
@@ -784,10 +784,9 @@ const NORMAL_SPAN: usize = 4;
 /// The centre of the junction (the corner's point of symmetry) lies midway, so each sample is
 /// moved back by half the offset of its polarity.
 ///
-/// At each corner `j` the jump `δⱼ` is the indicator coefficient of the least-squares fit
-/// `v = a + b u + c u² + δⱼ s` to the last and first [`JUMP_SAMPLES`] samples before and after it
-/// (`u` along the chord between them, `v` across, `s = ±½` by side), and `Dⱼ = (−1)ʲ⁺¹ δⱼ` is the
-/// offset there. Offsets are corrected only if their median `D` is larger than three standard
+/// At each corner `j` the jump `δⱼ` is measured by [`edge_jump`] on the last and first
+/// [`JUMP_SAMPLES`] samples before and after it, and `Dⱼ = (−1)ʲ⁺¹ δⱼ` is the offset there.
+/// Offsets are corrected only if their median `D` is larger than three standard
 /// errors (`1.4826 MAD √(π / 2n)`), so a clean print is left untouched. Each `Dⱼ` is then
 /// replaced by the median of it and its two neighbours (a missing one by `D`), because on a bent
 /// board the offset in px changes along the line with the foreshortening, and segment `k`
@@ -801,7 +800,13 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
         .map(|(j, &(_, cut))| {
             let before = &pts[cut.saturating_sub(JUMP_SAMPLES)..cut];
             let after = &pts[cut..(cut + JUMP_SAMPLES).min(pts.len())];
-            jump_at(before, after).map(|d| if j % 2 == 0 { -d } else { d })
+            edge_jump(before.iter().copied(), after.iter().copied()).map(|e| {
+                if j % 2 == 0 {
+                    -e.jump
+                } else {
+                    e.jump
+                }
+            })
         })
         .collect();
     let mut all: Vec<f64> = local.iter().flatten().copied().collect();
@@ -859,35 +864,6 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
         start = end;
     }
     offset
-}
-
-/// The jump across the line from `before` to `after` (see [`remove_polarity_offset`]), measured
-/// along the normal `(t_y, −t_x)` of the chord `t`; `None` with fewer than four samples a side or a
-/// degenerate fit.
-fn jump_at(before: &[[f64; 2]], after: &[[f64; 2]]) -> Option<f64> {
-    if before.len() < 4 || after.len() < 4 {
-        return None;
-    }
-    let (a, b) = (before[0], after[after.len() - 1]);
-    let t = normalize([b[0] - a[0], b[1] - a[1]])?;
-    let len = dist(a, b);
-    let (o0, o1) = (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]));
-    let mut ata = nalgebra::Matrix4::<f64>::zeros();
-    let mut atv = nalgebra::Vector4::<f64>::zeros();
-    for (side, p) in before
-        .iter()
-        .map(|p| (-0.5, p))
-        .chain(after.iter().map(|p| (0.5, p)))
-    {
-        let (dx, dy) = (p[0] - o0, p[1] - o1);
-        let u = (dx * t[0] + dy * t[1]) / len;
-        let v = dx * t[1] - dy * t[0];
-        let row = nalgebra::Vector4::new(1.0, u, u * u, side);
-        ata += row * row.transpose();
-        atv += row * v;
-    }
-    let sol = ata.cholesky()?.solve(&atv);
-    sol[3].is_finite().then_some(sol[3])
 }
 
 /// The open walk from end corner `e` away from its neighbour `n`, up to one square.

@@ -388,6 +388,89 @@ fn principal_frame(points: &[[f64; 2]], weights: Option<&[f64]>) -> Option<Frame
     })
 }
 
+/// The offset across an edge between two pieces of it that meet at a corner, as
+/// [`edge_jump`] measures it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeJump {
+    /// Offset (px) of `after` relative to `before`, along `normal`.
+    pub jump: f64,
+    /// Its standard error (px), from the fit residuals.
+    pub std_err: f64,
+    /// Unit normal `(t_y, −t_x)` of the chord `t` from the centroid of `before` to that of `after`.
+    pub normal: [f64; 2],
+}
+
+/// Measures the jump across an edge at a corner between the samples `before` and `after` on its
+/// two sides (image coordinates, px, any order within each side): the coefficient `δ` of the
+/// least-squares fit `v = a + b u + c u² + δ s`, with `u` along the chord between the two
+/// sides' centroids (scaled by its length), `v` across it, and `s = −½` before, `+½` after.
+///
+/// Along a checkerboard line the dark square changes sides at every corner, so a print with dot
+/// gain (dark squares grown by `g`) shifts the two sides of a corner by `±g` across the edge: a
+/// jump of `2g` that this measures, whatever the edge's curvature over a few squares. `None` with
+/// fewer than four samples a side or a degenerate fit.
+pub fn edge_jump<I, J>(before: I, after: J) -> Option<EdgeJump>
+where
+    I: Iterator<Item = [f64; 2]> + Clone,
+    J: Iterator<Item = [f64; 2]> + Clone,
+{
+    let centroid = |it: &mut dyn Iterator<Item = [f64; 2]>| {
+        let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+        for p in it {
+            n += 1;
+            sx += p[0];
+            sy += p[1];
+        }
+        (n, [sx / n.max(1) as f64, sy / n.max(1) as f64])
+    };
+    let (nb, cb) = centroid(&mut before.clone());
+    let (na, ca) = centroid(&mut after.clone());
+    if nb < 4 || na < 4 {
+        return None;
+    }
+    let (dx, dy) = (ca[0] - cb[0], ca[1] - cb[1]);
+    let len = dx.hypot(dy);
+    if !(len > 0.0) {
+        return None;
+    }
+    let t = [dx / len, dy / len];
+    let o = [0.5 * (ca[0] + cb[0]), 0.5 * (ca[1] + cb[1])];
+    let local = |p: [f64; 2]| {
+        let (x, y) = (p[0] - o[0], p[1] - o[1]);
+        ((x * t[0] + y * t[1]) / len, x * t[1] - y * t[0])
+    };
+    let sides = || {
+        before
+            .clone()
+            .map(|p| (-0.5, p))
+            .chain(after.clone().map(|p| (0.5, p)))
+    };
+    let mut ata = nalgebra::Matrix4::<f64>::zeros();
+    let mut atv = nalgebra::Vector4::<f64>::zeros();
+    for (side, p) in sides() {
+        let (u, v) = local(p);
+        let row = nalgebra::Vector4::new(1.0, u, u * u, side);
+        ata += row * row.transpose();
+        atv += row * v;
+    }
+    let inv = ata.try_inverse()?;
+    let sol = inv * atv;
+    let rss: f64 = sides()
+        .map(|(side, p)| {
+            let (u, v) = local(p);
+            let r = v - (sol[0] + sol[1] * u + sol[2] * u * u + sol[3] * side);
+            r * r
+        })
+        .sum();
+    let dof = (nb + na) as f64 - 4.0;
+    let std_err = (rss / dof * inv[(3, 3)]).sqrt();
+    (sol[3].is_finite() && std_err.is_finite()).then_some(EdgeJump {
+        jump: sol[3],
+        std_err,
+        normal: [t[1], -t[0]],
+    })
+}
+
 /// Total-least-squares line: through the weighted centroid, normal to the principal direction
 /// (eigenvector of the smallest eigenvalue of the weighted scatter matrix). `weights` default to 1
 /// and must be finite and ≥ 0. `None` with fewer than two distinct weighted points or bad input.
