@@ -505,3 +505,236 @@ fn canonicalize(board: &mut Board) {
     board.rows = board.labels.iter().map(|l| l.0 + 1).max().unwrap_or(0) as usize;
     board.cols = board.labels.iter().map(|l| l.1 + 1).max().unwrap_or(0) as usize;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::connectivity::{connect, label, ConnectivityParams};
+    use crate::election::find_corners;
+    use crate::prefilter::PrefilterParams;
+    use crate::synth::board::{BoardCorner, BoardScene, Dots, Occluder, Surface};
+    use crate::synth::{speed_benchmark_scene, SPEED_BENCHMARK_NOISE_SEED};
+
+    /// The elected corners and the labelled boards of a rendered scene.
+    fn labelled(
+        scene: &BoardScene,
+        seed: u64,
+    ) -> (GrayImage, Vec<BoardCorner>, Vec<Corner>, Vec<Board>) {
+        let r = scene.render(seed).expect("valid scene");
+        let corners = find_corners(&r.image, &PrefilterParams::default(), &Default::default());
+        let graph = connect(&corners, &ConnectivityParams::default());
+        let boards = label(&corners, &graph);
+        (r.image, r.corners, corners, boards)
+    }
+
+    fn nearest_truth(truth: &[BoardCorner], x: f64, y: f64) -> (f64, usize, usize) {
+        truth
+            .iter()
+            .filter(|t| t.x.is_finite())
+            .map(|t| ((t.x - x).hypot(t.y - y), t.row, t.col))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .expect("truth")
+    }
+
+    /// The truth `(row, col)` of every board corner, checked to be within 1.5 px of the truth.
+    fn truth_labels(
+        board: &Board,
+        corners: &[Corner],
+        truth: &[BoardCorner],
+    ) -> Vec<(Label, Label)> {
+        board
+            .corners
+            .iter()
+            .zip(&board.labels)
+            .map(|(&i, &l)| {
+                let (d, r, c) = nearest_truth(truth, corners[i].x, corners[i].y);
+                assert!(d < 1.5, "corner {l:?} is {d:.2} px from the truth");
+                ((r as i32, c as i32), l)
+            })
+            .collect()
+    }
+
+    /// Whether the label map truth → board is one affine lattice map (a symmetry and a shift).
+    fn consistent(pairs: &[(Label, Label)]) -> bool {
+        (0..8).any(|k| {
+            let map = |(r, c): Label| {
+                let (a, b) = if k & 4 != 0 { (c, r) } else { (r, c) };
+                (
+                    if k & 1 != 0 { -a } else { a },
+                    if k & 2 != 0 { -b } else { b },
+                )
+            };
+            let shift = |&(t, l): &(Label, Label)| {
+                let m = map(t);
+                (l.0 - m.0, l.1 - m.1)
+            };
+            pairs.iter().all(|p| shift(p) == shift(&pairs[0]))
+        })
+    }
+
+    fn scene(surface: Surface) -> BoardScene {
+        let mut s = speed_benchmark_scene();
+        s.surface = surface;
+        s
+    }
+
+    /// Removes the corners of the board at the given positions (by index into its list).
+    fn remove(board: &mut Board, keep: impl Fn(Label) -> bool) -> usize {
+        let before = board.corners.len();
+        let (c, l): (Vec<usize>, Vec<Label>) = board
+            .corners
+            .iter()
+            .zip(&board.labels)
+            .filter(|(_, &l)| keep(l))
+            .map(|(&i, &l)| (i, l))
+            .unzip();
+        board.corners = c;
+        board.labels = l;
+        before - board.corners.len()
+    }
+
+    #[test]
+    fn removed_corners_come_back_with_their_labels() {
+        for (surface, seed) in [
+            (Surface::Flat, SPEED_BENCHMARK_NOISE_SEED),
+            (Surface::SShape { radius_mm: 80.0 }, 3),
+        ] {
+            let (image, truth, mut corners, mut boards) = labelled(&scene(surface), seed);
+            assert_eq!(boards.len(), 1);
+            let full = boards[0].corners.len();
+            let (rows, cols) = (boards[0].rows as i32, boards[0].cols as i32);
+            // An inner block, one whole column, a board corner and one outer-ring row.
+            let removed = remove(&mut boards[0], |(r, c)| {
+                !((3..=4).contains(&r) && (3..=5).contains(&c))
+                    && c != 1
+                    && (r, c) != (rows - 1, cols - 1)
+                    && r != 0
+            });
+            let added = complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default(),
+            );
+            assert_eq!(added, removed, "{surface:?}");
+            assert_eq!(boards[0].corners.len(), full);
+            assert_eq!(
+                (boards[0].rows, boards[0].cols),
+                (rows as usize, cols as usize)
+            );
+            assert!(
+                consistent(&truth_labels(&boards[0], &corners, &truth)),
+                "{surface:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn nothing_is_added_to_a_complete_board_and_it_is_fast() {
+        let (image, _, mut corners, mut boards) =
+            labelled(&speed_benchmark_scene(), SPEED_BENCHMARK_NOISE_SEED);
+        let before = boards.clone();
+        let t = std::time::Instant::now();
+        let added = complete_boards(
+            &image,
+            &mut corners,
+            &mut boards,
+            &CompletionParams::default(),
+        );
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        eprintln!("completion of a complete board: {ms:.3} ms");
+        assert_eq!(added, 0);
+        assert_eq!(boards, before);
+    }
+
+    #[test]
+    fn an_occluder_over_corners_completes_nothing_there() {
+        // A dark bar and a bright one, each hiding a column of corners; with dots.
+        for intensity in [0.15, 0.85] {
+            let mut s = scene(Surface::Flat);
+            s.dots = Some(Dots {
+                radius: 0.2,
+                fraction: 0.4,
+                seed: 7,
+            });
+            let c = s.corners().expect("valid");
+            let at = |r: usize, k: usize| c.iter().find(|t| t.row == r && t.col == k).unwrap();
+            let (a, b) = (at(0, 4), at(s.rows - 1, 4));
+            let (dx, dy) = (b.x - a.x, b.y - a.y);
+            let len = dx.hypot(dy);
+            let step = (at(0, 5).x - a.x).hypot(at(0, 5).y - a.y);
+            s.occluders = vec![Occluder {
+                from: [a.x - dx / len * 3.0 * step, a.y - dy / len * 3.0 * step],
+                to: [b.x + dx / len * 3.0 * step, b.y + dy / len * 3.0 * step],
+                width: 0.4 * step,
+                intensity,
+            }];
+            let (image, truth, mut corners, mut boards) = labelled(&s, 11);
+            let n0: usize = boards.iter().map(|b| b.corners.len()).sum();
+            complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default(),
+            );
+            let n1: usize = boards.iter().map(|b| b.corners.len()).sum();
+            for b in &boards {
+                for &i in &b.corners {
+                    let (d, _, col) = nearest_truth(&truth, corners[i].x, corners[i].y);
+                    assert!(d < 1.5, "false corner {d:.2} px from the truth");
+                    assert_ne!(col, 4, "a corner under the bar was completed");
+                }
+                assert!(consistent(&truth_labels(b, &corners, &truth)));
+            }
+            eprintln!("bar {intensity}: {n0} → {n1} corners");
+        }
+    }
+
+    #[test]
+    fn bad_input_is_left_alone() {
+        let image = GrayImage::from_vec(32, 32, vec![0.5; 32 * 32]).unwrap();
+        let mut corners = vec![Corner {
+            x: 10.0,
+            y: 10.0,
+            angles: [0.0, 1.5],
+            score: 0.9,
+        }];
+        let mut boards = vec![Board {
+            corners: vec![0, 5],
+            labels: vec![(0, 0), (0, 1)],
+            rows: 1,
+            cols: 2,
+        }];
+        let before = boards.clone();
+        assert_eq!(
+            complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default()
+            ),
+            0
+        );
+        assert_eq!(boards, before);
+        // A flat image around a tiny "board": no reference, nothing added.
+        boards[0].corners = vec![0, 0];
+        assert_eq!(
+            complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default()
+            ),
+            0
+        );
+        assert_eq!(corners.len(), 1);
+    }
+
+    #[test]
+    fn consensus_needs_two_agreeing_predictions() {
+        assert_eq!(consensus(&mut [[0.0, 0.0]], 1.0), None);
+        assert_eq!(consensus(&mut [[0.0, 0.0], [5.0, 0.0]], 1.0), None);
+        let p = consensus(&mut [[0.0, 0.0], [0.5, 0.0], [9.0, 9.0]], 1.0).unwrap();
+        assert!((p[0] - 0.25).abs() < 1e-12 && p[1] == 0.0);
+    }
+}
