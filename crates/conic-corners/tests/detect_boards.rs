@@ -108,6 +108,9 @@ fn check(what: &str, det: &Detection, truth: &[BoardCorner]) -> Outcome {
             n += 1;
         } else {
             missing += 1;
+            if std::env::var("SHOW_MISSING").is_ok() {
+                eprintln!("missing {} {} at ({:.0}, {:.0})", t.row, t.col, t.x, t.y);
+            }
         }
     }
     let rms = (sq / n.max(1) as f64).sqrt();
@@ -326,6 +329,45 @@ fn real_photos_when_present() {
                     "{name}: boards {a} and {b} overlap"
                 );
             }
+        }
+    }
+}
+
+/// A bar parallel to column 4 of `s`, its centre line `offset` steps to the side, `width` steps
+/// wide, reaching past the board.
+fn bar_beside_column(s: &BoardScene, offset: f64, width: f64, intensity: f64) -> Occluder {
+    let c = s.corners().expect("valid");
+    let at = |r: usize, k: usize| c.iter().find(|t| t.row == r && t.col == k).expect("corner");
+    let (a, b) = (at(0, 4), at(s.rows - 1, 4));
+    let step = (at(0, 5).x - a.x).hypot(at(0, 5).y - a.y);
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    let len = dx.hypot(dy);
+    let (ux, uy) = (dx / len, dy / len);
+    let (nx, ny) = (-uy * offset * step, ux * offset * step);
+    Occluder {
+        from: [a.x - 2.0 * step * ux + nx, a.y - 2.0 * step * uy + ny],
+        to: [b.x + 2.0 * step * ux + nx, b.y + 2.0 * step * uy + ny],
+        width: width * step,
+        intensity,
+    }
+}
+
+#[test]
+fn completion_probe() {
+    let dots = Some(Dots {
+        radius: 0.2,
+        fraction: 0.4,
+        seed: 7,
+    });
+    for t in [0.01, 0.015] {
+        for rounds in [0, 3] {
+            let s = scene(Surface::SShape { radius_mm: 80.0 }, 5, |t| t.dots = dots);
+            let r = s.render(5).unwrap();
+            let mut p = DetectParams::default();
+            p.election.t_correlation = t;
+            p.completion.rounds = rounds;
+            let det = detect(&r.image, &p);
+            check(&format!("t {t} rounds {rounds}"), &det, &r.corners);
         }
     }
 }
