@@ -519,18 +519,19 @@ fn complete_one(
                 let Some((q, score)) = verify(image, p, (u, v), phase, min_contrast, params) else {
                     continue;
                 };
-                let refine = RefineParams {
-                    reach: step.clamp(5.0, params.refine.reach.max(5.0)),
-                    max_shift: params.max_offset * step,
-                    ..params.refine.clone()
-                };
-                // A refiner that fails (too few clean edge samples, e.g. scribbles across the
-                // edges) does not veto the junction found by the search; one that places the corner
-                // elsewhere does.
-                let refined = refine_one(image, q, &refine);
-                let z = match refined.status {
-                    Status::Failed => q,
-                    _ => [refined.x, refined.y],
+                // (c) The refiner must place the corner near the prediction. Long walks fail
+                // where scribbles or an occluder cut the edges, so shorter reaches are tried
+                // before giving up (a search position alone is only good to a few pixels).
+                let Some(z) = [1.0, 0.5, 0.3].into_iter().find_map(|k| {
+                    let refine = RefineParams {
+                        reach: (k * step).clamp(5.0, params.refine.reach.max(5.0)),
+                        max_shift: params.max_offset * step,
+                        ..params.refine.clone()
+                    };
+                    let r = refine_one(image, q, &refine);
+                    (r.status != Status::Failed).then_some([r.x, r.y])
+                }) else {
+                    continue;
                 };
                 if norm(sub(z, p)) > params.max_offset * step {
                     continue;

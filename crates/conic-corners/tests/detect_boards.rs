@@ -108,9 +108,6 @@ fn check(what: &str, det: &Detection, truth: &[BoardCorner]) -> Outcome {
             n += 1;
         } else {
             missing += 1;
-            if std::env::var("SHOW_MISSING").is_ok() {
-                eprintln!("missing {} {} at ({:.0}, {:.0})", t.row, t.col, t.x, t.y);
-            }
         }
     }
     let rms = (sq / n.max(1) as f64).sqrt();
@@ -301,14 +298,14 @@ fn real_photos_when_present() {
     }
     // Labelled corners achieved (lower bounds); each photo shows one board.
     let expected = [
-        ("curve_4.jpg", 101),
-        ("curve_5.jpg", 98),
-        ("curve_6.jpg", 89),
-        ("curve_7.jpg", 97),
+        ("curve_4.jpg", 104),
+        ("curve_5.jpg", 99),
+        ("curve_6.jpg", 101),
+        ("curve_7.jpg", 99),
         ("curve_8.jpg", 99),
-        ("marker_real.jpg", 86),
-        ("marker_real2.jpg", 120),
-        ("marker_real3.jpg", 77),
+        ("marker_real.jpg", 93),
+        ("marker_real2.jpg", 121),
+        ("marker_real3.jpg", 83),
     ];
     for (name, at_least) in expected {
         let image = GrayImage::open(dir.join(name)).expect("readable photo");
@@ -333,41 +330,27 @@ fn real_photos_when_present() {
     }
 }
 
-/// A bar parallel to column 4 of `s`, its centre line `offset` steps to the side, `width` steps
-/// wide, reaching past the board.
-fn bar_beside_column(s: &BoardScene, offset: f64, width: f64, intensity: f64) -> Occluder {
-    let c = s.corners().expect("valid");
-    let at = |r: usize, k: usize| c.iter().find(|t| t.row == r && t.col == k).expect("corner");
-    let (a, b) = (at(0, 4), at(s.rows - 1, 4));
-    let step = (at(0, 5).x - a.x).hypot(at(0, 5).y - a.y);
-    let (dx, dy) = (b.x - a.x, b.y - a.y);
-    let len = dx.hypot(dy);
-    let (ux, uy) = (dx / len, dy / len);
-    let (nx, ny) = (-uy * offset * step, ux * offset * step);
-    Occluder {
-        from: [a.x - 2.0 * step * ux + nx, a.y - 2.0 * step * uy + ny],
-        to: [b.x + 2.0 * step * ux + nx, b.y + 2.0 * step * uy + ny],
-        width: width * step,
-        intensity,
-    }
-}
-
+/// Grid completion restores the corners the election rejects: with a nearly strict score rule
+/// (`t_correlation` 0.015) the election drops about a fifth of the corners of a bent board with
+/// dots; completion brings them back at their labels, and only them.
 #[test]
-fn completion_probe() {
+fn completion_restores_corners_the_election_rejects() {
     let dots = Some(Dots {
         radius: 0.2,
         fraction: 0.4,
         seed: 7,
     });
-    for t in [0.01, 0.015] {
-        for rounds in [0, 3] {
-            let s = scene(Surface::SShape { radius_mm: 80.0 }, 5, |t| t.dots = dots);
-            let r = s.render(5).unwrap();
-            let mut p = DetectParams::default();
-            p.election.t_correlation = t;
-            p.completion.rounds = rounds;
-            let det = detect(&r.image, &p);
-            check(&format!("t {t} rounds {rounds}"), &det, &r.corners);
-        }
-    }
+    let s = scene(Surface::SShape { radius_mm: 80.0 }, 5, |t| t.dots = dots);
+    let r = s.render(5).unwrap();
+    let mut p = DetectParams::default();
+    p.election.t_correlation = 0.015;
+    p.completion.rounds = 0;
+    let without = check("strict election", &detect(&r.image, &p), &r.corners);
+    assert!(without.missing >= 10, "{}", without.missing);
+    p.completion.rounds = 3;
+    let det = detect(&r.image, &p);
+    let with = check("strict election + completion", &det, &r.corners);
+    assert_eq!(with.missing, 0);
+    assert_eq!(det.boards.len(), 1);
+    assert!(with.rms < RMS_BOUND, "{}", with.rms);
 }
