@@ -16,8 +16,10 @@
 //! 2. **Predictions.** For each labelled neighbour `n = t − e` (`e` one of the four unit label
 //!    steps) the step `e` is continued from `n`: along the same grid line (`2p(n) − p(n−e)`, or the
 //!    quadratic `3p(n) − 3p(n−e) + p(n−2e)` when three points are known, which follows bending),
-//!    and by copying the step `e` of each parallel line beside it (`p(n) + p(t±f) − p(t±f−e)`, a
-//!    parallelogram, or `p(n) + p(n±f) − p(n±f−e)` when the former is unknown; `f ⊥ e`). A site
+//!    and by copying the step `e` of each parallel line beside it (`f ⊥ e`): `p(n) + p(t±f) −
+//!    p(t±f−e)`, a parallelogram; when `p(t±f)` is unknown, the step of that line continued to
+//!    second order, `p(n) + 2(p(n±f) − p(n±f−e)) − (p(n±f−e) − p(n±f−2e))`, or to first order
+//!    when only two of its points are known. A site
 //!    between two labelled corners of one line also gets their midpoint. Predictions farther than
 //!    `agreement` grid steps from their coordinate-wise median are dropped; at least two must
 //!    remain and their mean is the prediction `p̂`.
@@ -26,15 +28,17 @@
 //!    `|a| + |b| ≤ 0.42` (away from the edges, which blur, and from the cell centres, where
 //!    HydraMarker dots sit). An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
 //!    `k`) times `(−1)^(r+c)` is the same all over a board, and is taken from the board's own
-//!    corners by majority. At the best point of a small search (±0.15 step around `p̂`) the
-//!    junction must (a) have every quadrant (median of its samples, robust to thin strokes) on the
+//!    corners by majority. A quick test on 5 samples per quadrant within 0.26 step (the quadrant
+//!    order of (a) with half its contrast) at `p̂` or one of four points 0.1 step away starts a
+//!    coarse-to-fine search (3 levels of 3 × 3 points, steps 0.1, 0.05, 0.025) for the highest
+//!    correlation; there the junction must (a) have every quadrant (median of its samples, robust to thin strokes) on the
 //!    right side — the darker of the two expected-bright quadrants exceeds the brighter of the
 //!    expected-dark ones by at least `min_contrast_rel` times the board's median; (b) correlate with
 //!    the ideal junction of the expected phase (normalized cross-correlation) at least `min_ncc`
 //!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
-//!    covering the junction or a quadrant fails; and (c) be refined by
-//!    [`refine_one`] to a [`Status::Converged`] corner within `max_offset` steps of `p̂` (reach
-//!    bounded by the step).
+//!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one`] (reach one
+//!    step, else half, else 0.3 step: long edge walks fail where scribbles or an occluder cut the
+//!    edges) to a corner that is not [`Status::Failed`], within `max_offset` steps of `p̂`.
 //! 4. **Acceptance.** A verified corner more than half a step from every corner of every board is
 //!    appended to `corners` (angles from `u` and `v`, score the correlation of (b)) and joins the
 //!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
@@ -735,10 +739,9 @@ mod tests {
             &CompletionParams::default(),
         );
         let ms = t.elapsed().as_secs_f64() * 1e3;
-        eprintln!(
-            "completion of a complete board: {ms:.3} ms evals {:?} refines {:?}",
-            EVALS, REFINES
-        );
+        eprintln!("completion of a complete board: {ms:.3} ms");
+        // A loose bound (shared machine): about 0.3 ms measured.
+        assert!(ms < 20.0, "{ms} ms");
         assert_eq!(added, 0);
         assert_eq!(boards, before);
     }
