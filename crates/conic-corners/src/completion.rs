@@ -37,8 +37,8 @@
 //!    the ideal junction of the expected phase (normalized cross-correlation) at least `min_ncc`
 //!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
 //!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one`] (reach one
-//!    step, else half, else 0.3 step: long edge walks fail where scribbles or an occluder cut the
-//!    edges) to a corner that is not [`Status::Failed`], within `max_offset` steps of `p̂`.
+//!    step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an occluder cut
+//!    the edges) to a corner that is not [`Status::Failed`], within `max_offset` steps of `p̂`.
 //! 4. **Acceptance.** A verified corner more than half a step from every corner of every board is
 //!    appended to `corners` (angles from `u` and `v`, score the correlation of (b)) and joins the
 //!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
@@ -526,7 +526,7 @@ fn complete_one(
                 // (c) The refiner must place the corner near the prediction. Long walks fail
                 // where scribbles or an occluder cut the edges, so shorter reaches are tried
                 // before giving up (a search position alone is only good to a few pixels).
-                let Some(z) = [1.0, 0.5, 0.3].into_iter().find_map(|k| {
+                let Some(z) = [1.0, 0.5, 0.3, 0.15].into_iter().find_map(|k| {
                     let refine = RefineParams {
                         reach: (k * step).clamp(5.0, params.refine.reach.max(5.0)),
                         max_shift: params.max_offset * step,
