@@ -1,10 +1,13 @@
 //! The whole detection pipeline on one image: Hessian pre-filter → template election → Delaunay
-//! connectivity and grid labels → subpixel refinement of every labelled corner.
+//! connectivity and grid labels → grid completion → subpixel refinement of every labelled corner.
 //!
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
 use crate::board_fit::{fit_board, BoardFitParams, Path};
-use crate::connectivity::{connect, label_with, ConnectivityParams, LabelParams};
+use crate::completion::{complete_boards, CompletionParams};
+use crate::connectivity::{
+    connect, label_with, Board as LabelledBoard, ConnectivityParams, LabelParams,
+};
 use crate::election::{elect, Corner, ElectionParams};
 use crate::prefilter::{prefilter, PrefilterParams};
 use crate::refine::{refine_one, RefineParams, Status};
@@ -23,6 +26,9 @@ pub struct DetectParams {
     pub connectivity: ConnectivityParams,
     /// Labelling (III-C): smallest board kept.
     pub labels: LabelParams,
+    /// Grid completion: missing corners predicted from the labelled grid and verified
+    /// (`rounds = 0` disables it).
+    pub completion: CompletionParams,
     /// Subpixel refinement of each corner; its `reach` is further bounded by the corner's
     /// distance to its farthest grid neighbour.
     pub refine: RefineParams,
@@ -54,6 +60,7 @@ impl Default for DetectParams {
             election: ElectionParams::default(),
             connectivity: ConnectivityParams::default(),
             labels: LabelParams::default(),
+            completion: CompletionParams::default(),
             refine: RefineParams {
                 stride: 2,
                 ..RefineParams::default()
@@ -135,6 +142,8 @@ pub struct Timing {
     pub election: f64,
     /// Delaunay connectivity and labels.
     pub connectivity: f64,
+    /// Grid completion.
+    pub completion: f64,
     /// Subpixel refinement of each corner.
     pub refine: f64,
     /// Board-wide fitting ([`RefineMode::Board`] only).
@@ -164,12 +173,17 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     let candidates = prefilter(image, &params.prefilter);
     let prefilter_ms = ms(t0);
     let t = Instant::now();
-    let corners = elect(image, &candidates, &params.election);
+    let mut corners = elect(image, &candidates, &params.election);
     let election_ms = ms(t);
     let t = Instant::now();
     let graph = connect(&corners, &params.connectivity);
-    let labelled = label_with(&corners, &graph, &params.labels);
+    let mut labelled = label_with(&corners, &graph, &params.labels);
     let connectivity_ms = ms(t);
+    // Completed corners are appended to `corners` (beyond `graph`'s range) and go through the
+    // same refinement as the others.
+    let t = Instant::now();
+    complete_boards(image, &mut corners, &mut labelled, &params.completion);
+    let completion_ms = ms(t);
     // Board mode fits the grid lines from the pixel-level corners (the walks measure the edges
     // themselves, and the fit only needs a corner within `max_shift` of the truth), so the local
     // refiner runs only where the board-wide fit falls back.
@@ -208,7 +222,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         ..pixel_corner(&corners[i], row, col)
                     },
                     _ => {
-                        let reach = neighbour_reach(&corners, &graph.neighbours[i], i);
+                        let reach = match graph.neighbours.get(i) {
+                            Some(nb) => neighbour_reach(&corners, nb, i),
+                            None => label_reach(&corners, b, i),
+                        };
                         refine_corner(image, &corners[i], row, col, reach, &params.refine)
                     }
                 },
@@ -227,6 +244,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             prefilter: prefilter_ms,
             election: election_ms,
             connectivity: connectivity_ms,
+            completion: completion_ms,
             refine: refine_ms,
             board_fit: board_fit_ms,
             total: ms(t0),
@@ -242,6 +260,21 @@ fn neighbour_reach(corners: &[Corner], neighbours: &[Option<usize>; 4], i: usize
         .iter()
         .flatten()
         .map(|&j| (corners[j].x - c.x).hypot(corners[j].y - c.y))
+        .max_by(f64::total_cmp)
+}
+
+/// [`neighbour_reach`] for a corner added by grid completion (it has no graph links): the
+/// distance to its farthest labelled 4-neighbour on the board.
+fn label_reach(corners: &[Corner], board: &LabelledBoard, i: usize) -> Option<f64> {
+    let k = board.corners.iter().position(|&j| j == i)?;
+    let (r, c) = board.labels[k];
+    let c0 = &corners[i];
+    board
+        .corners
+        .iter()
+        .zip(&board.labels)
+        .filter(|(_, &(lr, lc))| (lr - r).abs() + (lc - c).abs() == 1)
+        .map(|(&j, _)| (corners[j].x - c0.x).hypot(corners[j].y - c0.y))
         .max_by(f64::total_cmp)
 }
 

@@ -11,6 +11,7 @@
 //! | Hessian pre-filter (III-A) | [`prefilter`] |
 //! | template final election (III-B) | [`election`] |
 //! | Delaunay connectivity and grid labels (III-C) | [`connectivity`] |
+//! | completion of the labelled grid (missing corners verified) | [`completion`] |
 //! | sigmoid subpixel edge sampling (III-D) | [`edge_sampling`] |
 //! | sample-chain segmentation (III-E) | [`segmentation`] |
 //! | conic / line fitting and intersection (III-F) | [`quadratic_form`] |
@@ -23,6 +24,7 @@
 //! (OpenCV's convention). Pixel `(i, j)` covers `[i - 0.5, i + 0.5] × [j - 0.5, j + 0.5]`.
 
 pub mod board_fit;
+pub mod completion;
 pub mod connectivity;
 pub mod detect;
 pub mod edge_sampling;

@@ -1,0 +1,839 @@
+//! Grid completion: after labelling ([`crate::connectivity`]), the corners a board is missing —
+//! because the election rejected them (a scribble or a pen edge beside the junction, a dot, blur)
+//! or because the connectivity rule cut their links — are predicted from the labelled grid and
+//! added when an unoccluded X-junction is verified at the predicted place.
+//!
+//! Positions are image coordinates (x right, y down, pixel centres at integers). Labels are the
+//! `(row, col)` of [`crate::connectivity::Board`].
+//!
+//! # Rule ([`complete_boards`])
+//!
+//! For every board, repeated for up to [`CompletionParams::rounds`] rounds (new corners support new
+//! predictions):
+//!
+//! 1. **Targets.** Every unlabelled site `t = (r, c)` within the label range grown by one (the
+//!    outer ring) with at least one labelled 4-neighbour.
+//! 2. **Predictions.** For each labelled neighbour `n = t − e` (`e` one of the four unit label
+//!    steps) the step `e` is continued from `n`: along the same grid line (`2p(n) − p(n−e)`, or the
+//!    quadratic `3p(n) − 3p(n−e) + p(n−2e)` when three points are known, which follows bending),
+//!    and by copying the step `e` of each parallel line beside it (`f ⊥ e`): `p(n) + p(t±f) −
+//!    p(t±f−e)`, a parallelogram; when `p(t±f)` is unknown, the step of that line continued to
+//!    second order, `p(n) + 2(p(n±f) − p(n±f−e)) − (p(n±f−e) − p(n±f−2e))`, or to first order
+//!    when only two of its points are known. A site
+//!    between two labelled corners of one line also gets their midpoint. Predictions farther than
+//!    `agreement` grid steps from their coordinate-wise median are dropped; at least two must
+//!    remain and their mean is the prediction `p̂`.
+//! 3. **Verification** in the local grid frame `p + a·u + b·v` (`u`, `v`: the steps of the nearest
+//!    labelled column and row pairs), sampled on 84 points with `0.06 ≤ |a|, |b|` and
+//!    `|a| + |b| ≤ 0.42` (away from the edges, which blur, and from the cell centres, where
+//!    HydraMarker dots sit). An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
+//!    `k`) times `(−1)^(r+c)` is the same all over a board, and is taken from the board's own
+//!    corners by majority. A quick test on 5 samples per quadrant within 0.26 step (the quadrant
+//!    order of (a) with half its contrast) at `p̂` or one of four points 0.1 step away starts a
+//!    coarse-to-fine search (3 levels of 3 × 3 points, steps 0.1, 0.05, 0.025) for the highest
+//!    correlation; there the junction must (a) have every quadrant (median of its samples, robust to thin strokes) on the
+//!    right side — the darker of the two expected-bright quadrants exceeds the brighter of the
+//!    expected-dark ones by at least `min_contrast_rel` times the board's median; (b) correlate with
+//!    the ideal junction of the expected phase (normalized cross-correlation) at least `min_ncc`
+//!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
+//!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one`] (reach one
+//!    step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an occluder cut
+//!    the edges) to a corner that is not [`Status::Failed`], within `max_offset` steps of `p̂`.
+//! 4. **Acceptance.** A verified corner more than half a step from every corner of every board is
+//!    appended to `corners` (angles from `u` and `v`, score the correlation of (b)) and joins the
+//!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
+//!    the board is re-sorted by `(row, col)`.
+//!
+//! The result depends only on the input: targets are visited in label order and a round's
+//! acceptances take effect together at its end.
+//!
+//! Limitations: a site is completed only next to labelled corners, so a whole missing board
+//! region beyond one ring is reached only over several rounds; a junction whose quadrant is
+//! covered by an occluder of the same grey as that quadrant passes (a) but usually not (b).
+
+use crate::connectivity::Board;
+use crate::election::Corner;
+use crate::refine::{refine_one, RefineParams, Status};
+use crate::GrayImage;
+use std::collections::HashMap;
+use std::sync::OnceLock;
+
+/// Tuning of [`complete_boards`]; lengths in grid steps (the local square side).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompletionParams {
+    /// Rounds of prediction and verification (0 disables completion; default 3).
+    pub rounds: usize,
+    /// Largest distance of a prediction from the median prediction (default 0.15).
+    pub agreement: f64,
+    /// Smallest normalized correlation with the ideal junction, over all samples and over the
+    /// inner ones (default 0.7; an L-corner scores ≈ 0.58 and fails (a) anyway).
+    pub min_ncc: f64,
+    /// Smallest quadrant contrast as a fraction of the board's median (default 0.5).
+    pub min_contrast_rel: f64,
+    /// Largest distance between the refined corner and the prediction (default 0.25).
+    pub max_offset: f64,
+    /// Refiner settings for the check (c); `reach` and `max_shift` are set from the step.
+    pub refine: RefineParams,
+}
+
+impl Default for CompletionParams {
+    fn default() -> Self {
+        Self {
+            rounds: 3,
+            agreement: 0.15,
+            min_ncc: 0.7,
+            min_contrast_rel: 0.5,
+            max_offset: 0.25,
+            refine: RefineParams {
+                stride: 2,
+                ..RefineParams::default()
+            },
+        }
+    }
+}
+
+type Label = (i32, i32);
+type P = [f64; 2];
+
+/// Grid-frame sample offsets `(a, b)` and whether each is inner (`|a| + |b| ≤ 0.24`), grouped by
+/// quadrant: `(+,+)`, `(+,−)`, `(−,+)`, `(−,−)`; 21 per quadrant.
+fn pattern() -> &'static [(f64, f64, bool); 84] {
+    static PATTERN: OnceLock<[(f64, f64, bool); 84]> = OnceLock::new();
+    PATTERN.get_or_init(|| {
+        let mut out = [(0.0, 0.0, false); 84];
+        let mut k = 0;
+        for (sa, sb) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+            for i in 1..=6 {
+                for j in 1..=(7 - i) {
+                    let (a, b) = (0.06 * i as f64, 0.06 * j as f64);
+                    out[k] = (sa * a, sb * b, i + j <= 4);
+                    k += 1;
+                }
+            }
+        }
+        out
+    })
+}
+
+/// The checker measurements of [`junction`], signed for phase `+1` (quadrants `(+,+)` and
+/// `(−,−)` bright).
+#[derive(Clone, Copy, Debug)]
+struct Junction {
+    /// Correlation with `sign(a)·sign(b)` over all samples.
+    ncc: f64,
+    /// The same over the inner samples.
+    ncc_inner: f64,
+    /// `min(q₊₊, q₋₋) − max(q₊₋, q₋₊)` of the quadrant medians (phase +1); for phase −1 use
+    /// `contrast_neg`.
+    contrast_pos: f64,
+    /// `min(q₊₋, q₋₊) − max(q₊₊, q₋₋)`.
+    contrast_neg: f64,
+}
+
+impl Junction {
+    /// `(ncc, ncc_inner, contrast)` for the given phase (±1).
+    fn phased(&self, phase: f64) -> (f64, f64, f64) {
+        let c = if phase > 0.0 {
+            self.contrast_pos
+        } else {
+            self.contrast_neg
+        };
+        (phase * self.ncc, phase * self.ncc_inner, c)
+    }
+}
+
+fn ncc(sum: f64, sum_sq: f64, signed: f64, n: f64) -> f64 {
+    // Σ s·(f − f̄) = Σ s·f because the ±1 template is balanced.
+    let var = sum_sq - sum * sum / n;
+    if var > 1e-12 {
+        signed / (n * var).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Samples the junction model at `p` in the frame `(u, v)`; `None` if a sample leaves the image.
+fn junction(image: &GrayImage, p: P, u: P, v: P) -> Option<Junction> {
+    let mut q = [[0f32; 21]; 4];
+    let (mut s, mut s2, mut sg) = (0.0, 0.0, 0.0);
+    let (mut si, mut s2i, mut sgi, mut ni) = (0.0, 0.0, 0.0, 0.0);
+    for (k, &(a, b, inner)) in pattern().iter().enumerate() {
+        let x = p[0] + a * u[0] + b * v[0];
+        let y = p[1] + a * u[1] + b * v[1];
+        let f = image.bilinear(x as f32, y as f32)? as f64;
+        q[k / 21][k % 21] = f as f32;
+        let sign = a.signum() * b.signum();
+        s += f;
+        s2 += f * f;
+        sg += sign * f;
+        if inner {
+            si += f;
+            s2i += f * f;
+            sgi += sign * f;
+            ni += 1.0;
+        }
+    }
+    let med = |v: &mut [f32; 21]| -> f64 {
+        v.select_nth_unstable_by(10, f32::total_cmp);
+        v[10] as f64
+    };
+    let [pp, pm, mp, mm] = q.each_mut().map(med);
+    Some(Junction {
+        ncc: ncc(s, s2, sg, 84.0),
+        ncc_inner: ncc(si, s2i, sgi, ni),
+        contrast_pos: pp.min(mm) - pm.max(mp),
+        contrast_neg: pm.min(mp) - pp.max(mm),
+    })
+}
+
+/// The phased quadrant contrast of [`Junction`] from 5 samples per quadrant (their median), for
+/// a quick rejection; the samples lie within 0.26 step of `p`, so that a junction with a thin
+/// visible strip beside an occluder still passes.
+fn quick_contrast(image: &GrayImage, p: P, u: P, v: P, phase: f64) -> Option<f64> {
+    const AB: [(f64, f64); 5] = [
+        (0.08, 0.08),
+        (0.16, 0.06),
+        (0.06, 0.16),
+        (0.22, 0.1),
+        (0.1, 0.22),
+    ];
+    let mut q = [0f64; 4];
+    for (k, (sa, sb)) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let mut f = [0f64; 5];
+        for (fi, &(a, b)) in f.iter_mut().zip(&AB) {
+            let (a, b) = (sa * a, sb * b);
+            *fi = image.bilinear(
+                (p[0] + a * u[0] + b * v[0]) as f32,
+                (p[1] + a * u[1] + b * v[1]) as f32,
+            )? as f64;
+        }
+        f.sort_unstable_by(f64::total_cmp);
+        q[k] = f[2];
+    }
+    let [pp, pm, mp, mm] = q;
+    Some(if phase > 0.0 {
+        pp.min(mm) - pm.max(mp)
+    } else {
+        pm.min(mp) - pp.max(mm)
+    })
+}
+
+fn add(a: P, b: P) -> P {
+    [a[0] + b[0], a[1] + b[1]]
+}
+fn sub(a: P, b: P) -> P {
+    [a[0] - b[0], a[1] - b[1]]
+}
+fn scale(a: P, s: f64) -> P {
+    [a[0] * s, a[1] * s]
+}
+fn norm(a: P) -> f64 {
+    a[0].hypot(a[1])
+}
+
+/// The board's positions by label, dense over the label range grown by a margin (every label a
+/// completion can reach), `None` outside.
+struct Grid {
+    r0: i32,
+    c0: i32,
+    rows: i32,
+    cols: i32,
+    at: Vec<Option<P>>,
+}
+
+impl Grid {
+    fn new(labels: &[Label], positions: impl Iterator<Item = P>, margin: i32) -> Self {
+        let (r0, r1, c0, c1) = range(labels);
+        let (r0, c0) = (r0 - margin, c0 - margin);
+        let (rows, cols) = (r1 + margin + 1 - r0, c1 + margin + 1 - c0);
+        let mut grid = Self {
+            r0,
+            c0,
+            rows,
+            cols,
+            at: vec![None; (rows * cols) as usize],
+        };
+        for (&l, p) in labels.iter().zip(positions) {
+            grid.set(l, p);
+        }
+        grid
+    }
+
+    fn index(&self, (r, c): Label) -> Option<usize> {
+        let (i, j) = (r - self.r0, c - self.c0);
+        ((0..self.rows).contains(&i) && (0..self.cols).contains(&j))
+            .then(|| (i * self.cols + j) as usize)
+    }
+
+    fn get(&self, t: Label) -> Option<P> {
+        self.index(t).and_then(|k| self.at[k])
+    }
+
+    fn set(&mut self, t: Label, p: P) {
+        if let Some(k) = self.index(t) {
+            self.at[k] = Some(p);
+        }
+    }
+
+    /// The step of the labelled pair along `e` nearest to `t` (`t + k` and `t + k + e`).
+    fn local_step(&self, t: Label, e: Label) -> Option<P> {
+        let mut best: Option<(i32, P)> = None;
+        for dr in -2..=2 {
+            for dc in -2..=2 {
+                let a = (t.0 + dr, t.1 + dc);
+                let b = (a.0 + e.0, a.1 + e.1);
+                let cost = (2 * dr + e.0).abs() + (2 * dc + e.1).abs();
+                if best.is_some_and(|(c, _)| c <= cost) {
+                    continue;
+                }
+                if let (Some(pa), Some(pb)) = (self.get(a), self.get(b)) {
+                    best = Some((cost, sub(pb, pa)));
+                }
+            }
+        }
+        best.map(|(_, s)| s)
+    }
+
+    /// The frame `(u, v)`: column and row steps near `t`.
+    fn frame(&self, t: Label) -> Option<(P, P)> {
+        Some((self.local_step(t, (0, 1))?, self.local_step(t, (1, 0))?))
+    }
+
+    /// Every prediction of `t` (rule step 2), pushed to `out`.
+    fn predictions(&self, t: Label, out: &mut Vec<P>) {
+        out.clear();
+        let at = |dr: i32, dc: i32| self.get((t.0 + dr, t.1 + dc));
+        for e in [(0, 1), (1, 0), (0, -1), (-1, 0)] {
+            let Some(n) = at(-e.0, -e.1) else { continue };
+            if let Some(n1) = at(-2 * e.0, -2 * e.1) {
+                out.push(match at(-3 * e.0, -3 * e.1) {
+                    Some(n2) => add(scale(sub(n, n1), 3.0), n2),
+                    None => sub(scale(n, 2.0), n1),
+                });
+            }
+            if let Some(o) = at(e.0, e.1) {
+                // Each line's midpoint is pushed once, from its lower side.
+                if e.0 + e.1 > 0 {
+                    out.push(scale(add(n, o), 0.5));
+                }
+            }
+            for f in [(e.1, e.0), (-e.1, -e.0)] {
+                let line = |k: i32| at(f.0 - k * e.0, f.1 - k * e.1);
+                let step = match (line(0), line(1), line(2), line(3)) {
+                    (Some(p0), Some(p1), _, _) => sub(p0, p1),
+                    // The step continued along the parallel line: second order when possible.
+                    (None, Some(p1), Some(p2), Some(p3)) => {
+                        add(scale(sub(p1, p2), 2.0), sub(p3, p2))
+                    }
+                    (None, Some(p1), Some(p2), None) => sub(p1, p2),
+                    _ => continue,
+                };
+                out.push(add(n, step));
+            }
+        }
+    }
+}
+
+/// The mean of the predictions within `tol` of their coordinate-wise median, if at least two.
+fn consensus(preds: &mut [P], tol: f64) -> Option<P> {
+    if preds.len() < 2 {
+        return None;
+    }
+    let median = |k: usize, v: &mut [P]| {
+        v.sort_by(|a, b| a[k].total_cmp(&b[k]));
+        let m = v.len() / 2;
+        if v.len() % 2 == 1 {
+            v[m][k]
+        } else {
+            0.5 * (v[m - 1][k] + v[m][k])
+        }
+    };
+    let med = [median(0, preds), median(1, preds)];
+    let (mut sum, mut n) = ([0.0, 0.0], 0);
+    for p in preds.iter().filter(|p| norm(sub(**p, med)) <= tol) {
+        sum = add(sum, *p);
+        n += 1;
+    }
+    (n >= 2).then(|| scale(sum, 1.0 / n as f64))
+}
+
+/// What a board's own corners look like: the phase and the median phased contrast.
+struct Reference {
+    phase: f64,
+    contrast: f64,
+}
+
+fn parity((r, c): Label) -> f64 {
+    if (r + c).rem_euclid(2) == 0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// Corners measured for the board's [`Reference`] (evenly spread over its label order).
+const REFERENCE_CORNERS: usize = 32;
+
+/// The board's phase (majority) and median contrast, from at most [`REFERENCE_CORNERS`] of its
+/// corners.
+fn reference(image: &GrayImage, grid: &Grid, labels: &[Label]) -> Option<Reference> {
+    let stride = labels.len().div_ceil(REFERENCE_CORNERS).max(1);
+    let mut measured = Vec::with_capacity(REFERENCE_CORNERS);
+    for &t in labels.iter().step_by(stride) {
+        let (Some(p), Some((u, v))) = (grid.get(t), grid.frame(t)) else {
+            continue;
+        };
+        if let Some(j) = junction(image, p, u, v) {
+            measured.push((t, j));
+        }
+    }
+    let votes: f64 = measured
+        .iter()
+        .map(|(t, j)| j.ncc.signum() * parity(*t))
+        .sum();
+    if votes == 0.0 {
+        return None;
+    }
+    let phase = votes.signum();
+    let mut contrast: Vec<f64> = measured
+        .iter()
+        .map(|(t, j)| j.phased(phase * parity(*t)).2)
+        .collect();
+    if contrast.is_empty() {
+        return None;
+    }
+    let m = contrast.len() / 2;
+    contrast.select_nth_unstable_by(m, f64::total_cmp);
+    (contrast[m] > 0.0).then_some(Reference {
+        phase,
+        contrast: contrast[m],
+    })
+}
+
+/// Searches the best junction near `p` (±0.15 step, coarse to fine) and applies checks (a), (b).
+fn verify(
+    image: &GrayImage,
+    p: P,
+    (u, v): (P, P),
+    phase: f64,
+    min_contrast: f64,
+    params: &CompletionParams,
+) -> Option<(P, f64)> {
+    let score = |q: P| -> Option<(f64, f64, f64)> { Some(junction(image, q, u, v)?.phased(phase)) };
+    // Cheap rejection first, on 12 samples: near a true junction (within about 0.1 step) the
+    // quadrants are already in order with half the contrast required of the result. The
+    // prediction and four points 0.1 step away are tried.
+    let start = [[0.0, 0.0], [0.1, 0.0], [-0.1, 0.0], [0.0, 0.1], [0.0, -0.1]]
+        .into_iter()
+        .map(|[i, j]| add(p, add(scale(u, i), scale(v, j))))
+        .find(|&q| {
+            quick_contrast(image, q, u, v, phase).is_some_and(|c| c >= 0.5 * min_contrast)
+        })?;
+    let (mut best, mut best_s) = (start, score(start)?);
+    for h in [0.1, 0.05, 0.025] {
+        let centre = best;
+        for i in -1..=1 {
+            for j in -1..=1 {
+                if (i, j) == (0, 0) {
+                    continue;
+                }
+                let q = add(centre, add(scale(u, h * i as f64), scale(v, h * j as f64)));
+                if let Some(s) = score(q) {
+                    if s.0 > best_s.0 {
+                        (best, best_s) = (q, s);
+                    }
+                }
+            }
+        }
+    }
+    let (n_all, n_inner, contrast) = best_s;
+    (n_all >= params.min_ncc && n_inner >= params.min_ncc && contrast >= min_contrast)
+        .then_some((best, n_all))
+}
+
+/// Completes every board (rule in the [module docs](self)): verified corners are appended to
+/// `corners` and their indices and labels added to the boards, which stay canonical (minimum
+/// label 0, sorted by `(row, col)`, `rows`/`cols` updated). Returns the number of corners added.
+/// Boards whose indices are out of range of `corners` are left alone.
+pub fn complete_boards(
+    image: &GrayImage,
+    corners: &mut Vec<Corner>,
+    boards: &mut [Board],
+    params: &CompletionParams,
+) -> usize {
+    let mut added = 0;
+    for b in 0..boards.len() {
+        added += complete_one(image, corners, boards, b, params);
+    }
+    added
+}
+
+fn complete_one(
+    image: &GrayImage,
+    corners: &mut Vec<Corner>,
+    boards: &mut [Board],
+    b: usize,
+    params: &CompletionParams,
+) -> usize {
+    if boards[b].corners.iter().any(|&i| i >= corners.len()) || boards[b].labels.is_empty() {
+        return 0;
+    }
+    let margin = params.rounds.min(1000) as i32 + 3;
+    let mut grid = Grid::new(
+        &boards[b].labels,
+        boards[b]
+            .corners
+            .iter()
+            .map(|&i| [corners[i].x, corners[i].y]),
+        margin,
+    );
+    let Some(reference) = reference(image, &grid, &boards[b].labels) else {
+        return 0;
+    };
+    let min_contrast = params.min_contrast_rel * reference.contrast;
+    // Prediction count at each failed site: it is retried only with more support.
+    let mut tried: HashMap<Label, usize> = HashMap::new();
+    let mut preds = Vec::with_capacity(16);
+    let mut added = 0;
+    for _ in 0..params.rounds {
+        let (r0, r1, c0, c1) = range(&boards[b].labels);
+        let mut accepted: Vec<(Label, Corner)> = Vec::new();
+        for r in r0 - 1..=r1 + 1 {
+            for c in c0 - 1..=c1 + 1 {
+                let t = (r, c);
+                if grid.get(t).is_some() {
+                    continue;
+                }
+                grid.predictions(t, &mut preds);
+                if preds.len() < 2 || tried.get(&t).is_some_and(|&n| n >= preds.len()) {
+                    continue;
+                }
+                tried.insert(t, preds.len());
+                let Some((u, v)) = grid.frame(t) else {
+                    continue;
+                };
+                let step = 0.5 * (norm(u) + norm(v));
+                let Some(p) = consensus(&mut preds, params.agreement * step) else {
+                    continue;
+                };
+                let phase = reference.phase * parity(t);
+                let Some((q, score)) = verify(image, p, (u, v), phase, min_contrast, params) else {
+                    continue;
+                };
+                // (c) The refiner must place the corner near the prediction. Long walks fail
+                // where scribbles or an occluder cut the edges, so shorter reaches are tried
+                // before giving up (a search position alone is only good to a few pixels).
+                let Some(z) = [1.0, 0.5, 0.3, 0.15].into_iter().find_map(|k| {
+                    let refine = RefineParams {
+                        reach: (k * step).clamp(5.0, params.refine.reach.max(5.0)),
+                        max_shift: params.max_offset * step,
+                        ..params.refine.clone()
+                    };
+                    let r = refine_one(image, q, &refine);
+                    (r.status != Status::Failed).then_some([r.x, r.y])
+                }) else {
+                    continue;
+                };
+                if norm(sub(z, p)) > params.max_offset * step {
+                    continue;
+                }
+                let clear = |x: f64, y: f64| (x - z[0]).hypot(y - z[1]) > 0.5 * step;
+                let free = boards
+                    .iter()
+                    .flat_map(|bd| bd.corners.iter())
+                    .all(|&i| clear(corners[i].x, corners[i].y))
+                    && accepted.iter().all(|(_, a)| clear(a.x, a.y));
+                if !free {
+                    continue;
+                }
+                let angle = |d: P| d[1].atan2(d[0]).rem_euclid(std::f64::consts::PI);
+                accepted.push((
+                    t,
+                    Corner {
+                        x: z[0],
+                        y: z[1],
+                        angles: [angle(u), angle(v)],
+                        score,
+                    },
+                ));
+            }
+        }
+        if accepted.is_empty() {
+            break;
+        }
+        for (t, c) in accepted {
+            grid.set(t, [c.x, c.y]);
+            boards[b].corners.push(corners.len());
+            boards[b].labels.push(t);
+            corners.push(c);
+            added += 1;
+        }
+    }
+    if added > 0 {
+        canonicalize(&mut boards[b]);
+    }
+    added
+}
+
+/// `(min row, max row, min col, max col)` of non-empty `labels`.
+fn range(labels: &[Label]) -> (i32, i32, i32, i32) {
+    labels.iter().fold(
+        (i32::MAX, i32::MIN, i32::MAX, i32::MIN),
+        |(r0, r1, c0, c1), &(r, c)| (r0.min(r), r1.max(r), c0.min(c), c1.max(c)),
+    )
+}
+
+/// Shifts labels to a minimum of 0, sorts by `(row, col)` and sets `rows`, `cols`.
+fn canonicalize(board: &mut Board) {
+    let r0 = board.labels.iter().map(|l| l.0).min().unwrap_or(0);
+    let c0 = board.labels.iter().map(|l| l.1).min().unwrap_or(0);
+    let mut pairs: Vec<(Label, usize)> = board
+        .labels
+        .iter()
+        .zip(&board.corners)
+        .map(|(&(r, c), &i)| ((r - r0, c - c0), i))
+        .collect();
+    pairs.sort_unstable();
+    board.labels = pairs.iter().map(|p| p.0).collect();
+    board.corners = pairs.iter().map(|p| p.1).collect();
+    board.rows = board.labels.iter().map(|l| l.0 + 1).max().unwrap_or(0) as usize;
+    board.cols = board.labels.iter().map(|l| l.1 + 1).max().unwrap_or(0) as usize;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::connectivity::{connect, label, ConnectivityParams};
+    use crate::election::find_corners;
+    use crate::prefilter::PrefilterParams;
+    use crate::synth::board::{BoardCorner, BoardScene, Dots, Occluder, Surface};
+    use crate::synth::{speed_benchmark_scene, SPEED_BENCHMARK_NOISE_SEED};
+
+    /// The elected corners and the labelled boards of a rendered scene.
+    fn labelled(
+        scene: &BoardScene,
+        seed: u64,
+    ) -> (GrayImage, Vec<BoardCorner>, Vec<Corner>, Vec<Board>) {
+        let r = scene.render(seed).expect("valid scene");
+        let corners = find_corners(&r.image, &PrefilterParams::default(), &Default::default());
+        let graph = connect(&corners, &ConnectivityParams::default());
+        let boards = label(&corners, &graph);
+        (r.image, r.corners, corners, boards)
+    }
+
+    fn nearest_truth(truth: &[BoardCorner], x: f64, y: f64) -> (f64, usize, usize) {
+        truth
+            .iter()
+            .filter(|t| t.x.is_finite())
+            .map(|t| ((t.x - x).hypot(t.y - y), t.row, t.col))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .expect("truth")
+    }
+
+    /// The truth `(row, col)` of every board corner, checked to be within 1.5 px of the truth.
+    fn truth_labels(
+        board: &Board,
+        corners: &[Corner],
+        truth: &[BoardCorner],
+    ) -> Vec<(Label, Label)> {
+        board
+            .corners
+            .iter()
+            .zip(&board.labels)
+            .map(|(&i, &l)| {
+                let (d, r, c) = nearest_truth(truth, corners[i].x, corners[i].y);
+                assert!(d < 1.5, "corner {l:?} is {d:.2} px from the truth");
+                ((r as i32, c as i32), l)
+            })
+            .collect()
+    }
+
+    /// Whether the label map truth → board is one affine lattice map (a symmetry and a shift).
+    fn consistent(pairs: &[(Label, Label)]) -> bool {
+        (0..8).any(|k| {
+            let map = |(r, c): Label| {
+                let (a, b) = if k & 4 != 0 { (c, r) } else { (r, c) };
+                (
+                    if k & 1 != 0 { -a } else { a },
+                    if k & 2 != 0 { -b } else { b },
+                )
+            };
+            let shift = |&(t, l): &(Label, Label)| {
+                let m = map(t);
+                (l.0 - m.0, l.1 - m.1)
+            };
+            pairs.iter().all(|p| shift(p) == shift(&pairs[0]))
+        })
+    }
+
+    fn scene(surface: Surface) -> BoardScene {
+        let mut s = speed_benchmark_scene();
+        s.surface = surface;
+        s
+    }
+
+    /// Removes the corners of the board at the given positions (by index into its list).
+    fn remove(board: &mut Board, keep: impl Fn(Label) -> bool) -> usize {
+        let before = board.corners.len();
+        let (c, l): (Vec<usize>, Vec<Label>) = board
+            .corners
+            .iter()
+            .zip(&board.labels)
+            .filter(|(_, &l)| keep(l))
+            .map(|(&i, &l)| (i, l))
+            .unzip();
+        board.corners = c;
+        board.labels = l;
+        before - board.corners.len()
+    }
+
+    #[test]
+    fn removed_corners_come_back_with_their_labels() {
+        for (surface, seed) in [
+            (Surface::Flat, SPEED_BENCHMARK_NOISE_SEED),
+            (Surface::SShape { radius_mm: 80.0 }, 3),
+        ] {
+            let (image, truth, mut corners, mut boards) = labelled(&scene(surface), seed);
+            assert_eq!(boards.len(), 1);
+            let full = boards[0].corners.len();
+            let (rows, cols) = (boards[0].rows as i32, boards[0].cols as i32);
+            // An inner block, one whole column, a board corner and one outer-ring row.
+            let removed = remove(&mut boards[0], |(r, c)| {
+                !((3..=4).contains(&r) && (3..=5).contains(&c))
+                    && c != 1
+                    && (r, c) != (rows - 1, cols - 1)
+                    && r != 0
+            });
+            let added = complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default(),
+            );
+            assert_eq!(added, removed, "{surface:?}");
+            assert_eq!(boards[0].corners.len(), full);
+            assert_eq!(
+                (boards[0].rows, boards[0].cols),
+                (rows as usize, cols as usize)
+            );
+            assert!(
+                consistent(&truth_labels(&boards[0], &corners, &truth)),
+                "{surface:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn nothing_is_added_to_a_complete_board_and_it_is_fast() {
+        let (image, _, mut corners, mut boards) =
+            labelled(&speed_benchmark_scene(), SPEED_BENCHMARK_NOISE_SEED);
+        let before = boards.clone();
+        let t = std::time::Instant::now();
+        let added = complete_boards(
+            &image,
+            &mut corners,
+            &mut boards,
+            &CompletionParams::default(),
+        );
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        eprintln!("completion of a complete board: {ms:.3} ms");
+        // A loose bound (shared machine): about 0.3 ms measured.
+        assert!(ms < 20.0, "{ms} ms");
+        assert_eq!(added, 0);
+        assert_eq!(boards, before);
+    }
+
+    #[test]
+    fn an_occluder_over_corners_completes_nothing_there() {
+        // A dark bar and a bright one, each hiding a column of corners; with dots.
+        for intensity in [0.15, 0.85] {
+            let mut s = scene(Surface::Flat);
+            s.dots = Some(Dots {
+                radius: 0.2,
+                fraction: 0.4,
+                seed: 7,
+            });
+            let c = s.corners().expect("valid");
+            let at = |r: usize, k: usize| c.iter().find(|t| t.row == r && t.col == k).unwrap();
+            let (a, b) = (at(0, 4), at(s.rows - 1, 4));
+            let (dx, dy) = (b.x - a.x, b.y - a.y);
+            let len = dx.hypot(dy);
+            let step = (at(0, 5).x - a.x).hypot(at(0, 5).y - a.y);
+            s.occluders = vec![Occluder {
+                from: [a.x - dx / len * 3.0 * step, a.y - dy / len * 3.0 * step],
+                to: [b.x + dx / len * 3.0 * step, b.y + dy / len * 3.0 * step],
+                width: 0.4 * step,
+                intensity,
+            }];
+            let (image, truth, mut corners, mut boards) = labelled(&s, 11);
+            let n0: usize = boards.iter().map(|b| b.corners.len()).sum();
+            complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default(),
+            );
+            let n1: usize = boards.iter().map(|b| b.corners.len()).sum();
+            for b in &boards {
+                for &i in &b.corners {
+                    let (d, _, col) = nearest_truth(&truth, corners[i].x, corners[i].y);
+                    assert!(d < 1.5, "false corner {d:.2} px from the truth");
+                    assert_ne!(col, 4, "a corner under the bar was completed");
+                }
+                assert!(consistent(&truth_labels(b, &corners, &truth)));
+            }
+            eprintln!("bar {intensity}: {n0} → {n1} corners");
+        }
+    }
+
+    #[test]
+    fn bad_input_is_left_alone() {
+        let image = GrayImage::from_vec(32, 32, vec![0.5; 32 * 32]).unwrap();
+        let mut corners = vec![Corner {
+            x: 10.0,
+            y: 10.0,
+            angles: [0.0, 1.5],
+            score: 0.9,
+        }];
+        let mut boards = vec![Board {
+            corners: vec![0, 5],
+            labels: vec![(0, 0), (0, 1)],
+            rows: 1,
+            cols: 2,
+        }];
+        let before = boards.clone();
+        assert_eq!(
+            complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default()
+            ),
+            0
+        );
+        assert_eq!(boards, before);
+        // A flat image around a tiny "board": no reference, nothing added.
+        boards[0].corners = vec![0, 0];
+        assert_eq!(
+            complete_boards(
+                &image,
+                &mut corners,
+                &mut boards,
+                &CompletionParams::default()
+            ),
+            0
+        );
+        assert_eq!(corners.len(), 1);
+    }
+
+    #[test]
+    fn consensus_needs_two_agreeing_predictions() {
+        assert_eq!(consensus(&mut [[0.0, 0.0]], 1.0), None);
+        assert_eq!(consensus(&mut [[0.0, 0.0], [5.0, 0.0]], 1.0), None);
+        let p = consensus(&mut [[0.0, 0.0], [0.5, 0.0], [9.0, 9.0]], 1.0).unwrap();
+        assert!((p[0] - 0.25).abs() < 1e-12 && p[1] == 0.0);
+    }
+}
