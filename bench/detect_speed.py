@@ -125,7 +125,8 @@ def render(rows, stages, markdown):
     body = [[r["method"], r["image"], f"{r['ms']:.1f}", str(r["runs"]), str(r["corners"]),
              fmt(r["err"], ".3f"), fmt(r["matched"], ".0%"), fmt(r["ratio"], ".1f") + "x"]
             for r in rows]
-    keys = ["prefilter", "election", "connectivity", "refine", "board_fit", "total", "wall_ms"]
+    keys = ["prefilter", "election", "connectivity", "completion", "refine", "board_fit", "total",
+            "wall_ms"]
     what = ("conic-corners stages, median ms (total excludes decoding; wall_ms: one process "
             f"reading, decoding, detecting and printing one image, median of {WALL_RUNS})")
     lines = []
