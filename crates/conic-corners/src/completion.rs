@@ -31,8 +31,8 @@
 //!    corners by majority. A quick test on 5 samples per quadrant within 0.26 step (the quadrant
 //!    order of (a) with half its contrast) at `p̂` or one of four points 0.1 step away starts a
 //!    coarse-to-fine search (3 levels of 3 × 3 points, steps 0.1, 0.05, 0.025) for the highest
-//!    correlation; there the junction must (a) have every quadrant (median of its samples, robust to thin strokes) on the
-//!    right side — the darker of the two expected-bright quadrants exceeds the brighter of the
+//!    correlation; there the junction must (a) have every quadrant (median of its samples, robust
+//!    to thin strokes) on the right side — the darker of the two expected-bright quadrants exceeds the brighter of the
 //!    expected-dark ones by at least `min_contrast_rel` times the board's median; (b) correlate with
 //!    the ideal junction of the expected phase (normalized cross-correlation) at least `min_ncc`
 //!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
