@@ -27,8 +27,8 @@ pub struct DetectArgs {
     /// Smallest board (corners) reported.
     #[arg(long, default_value_t = DetectParams::default().labels.min_corners)]
     min_board_corners: usize,
-    /// Write the image with corners, grid edges and labels drawn on it (one input image only); with
-    /// `--refine board` also the edge samples and the fitted curves.
+    /// Write the image with corners, grid edges and labels drawn on it (one input image only); in
+    /// board mode (the default) also the edge samples and the fitted curves.
     #[arg(long, value_name = "OUT.png", conflicts_with = "draw_dir")]
     draw: Option<PathBuf>,
     /// Write one overlay per input image into DIR (named after the input, as PNG).
