@@ -13,7 +13,9 @@
 //!    occluder);
 //! 3. one curve per edge is fitted through the samples of both its opposite rays
 //!    ([`quadratic_form::fit_edge_curve`](crate::quadratic_form::fit_edge_curve)), with outlier
-//!    samples rejected by their distance to a first fit;
+//!    samples rejected by their distance to a first fit; the two rays have the dark square on
+//!    opposite sides, so a print's dot gain offsets them across the edge, and a significant offset
+//!    between them near the corner is removed (half from each) before the final fit;
 //! 4. the corner is the intersection of the two curves nearest the current estimate (pencil of
 //!    conics, eq. 11).
 //!
