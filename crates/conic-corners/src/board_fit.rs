@@ -53,7 +53,7 @@ use crate::edge_sampling::{
 use crate::quadratic_form::{
     edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve, EdgeModel,
 };
-use crate::segmentation::{segment_chain, SegmentationParams};
+use crate::segmentation::{median_mad_in_place, segment_chain, SegmentationParams};
 use crate::GrayImage;
 use nalgebra::{Matrix5, Vector5};
 use rayon::prelude::*;
@@ -813,16 +813,9 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
     if all.len() < 3 {
         return 0.0;
     }
-    let median = |v: &mut [f64]| {
-        let mid = v.len() / 2;
-        *v.select_nth_unstable_by(mid, f64::total_cmp).1
-    };
-    let offset = median(&mut all);
     let n = all.len() as f64;
-    for d in all.iter_mut() {
-        *d = (*d - offset).abs();
-    }
-    let se = 1.4826 * median(&mut all) * (std::f64::consts::FRAC_PI_2 / n).sqrt();
+    let (offset, mad) = median_mad_in_place(&mut all);
+    let se = 1.4826 * mad * (std::f64::consts::FRAC_PI_2 / n).sqrt();
     if offset.abs() <= 3.0 * se {
         return 0.0;
     }
@@ -834,7 +827,7 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
                 at(j),
                 local.get(j + 1).map_or(offset, |_| at(j + 1)),
             ];
-            median(&mut w)
+            median_mad_in_place(&mut w).0
         })
         .collect();
     let mut start = 0;

@@ -31,6 +31,7 @@ use crate::election::edge_orientations;
 use crate::quadratic_form::{
     fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
 };
+use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;
 use rayon::prelude::*;
 
@@ -546,13 +547,7 @@ fn polarity_offset(
             let p = move_across(curve, s.point, shift);
             curve.distance(p[0], p[1])
         }));
-        let mid = JUMP_SAMPLES / 2;
-        let m = *scratch.select_nth_unstable_by(mid, f64::total_cmp).1;
-        for d in scratch.iter_mut() {
-            *d = (*d - m).abs();
-        }
-        let mad = *scratch.select_nth_unstable_by(mid, f64::total_cmp).1;
-        (m, mad)
+        median_mad_in_place(scratch)
     };
     let (ma, da) = median_mad(a, -0.5 * removed);
     let (mb, db) = median_mad(b, 0.5 * removed);

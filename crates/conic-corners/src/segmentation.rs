@@ -105,15 +105,21 @@ fn gaussian_smooth(v: &[f64], sigma: f64) -> Vec<f64> {
 /// Median and MAD (median absolute deviation) of finite values; `(0, 0)` if none.
 fn median_mad(v: &[f64]) -> (f64, f64) {
     let mut w: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-    if w.is_empty() {
+    median_mad_in_place(&mut w)
+}
+
+/// Median and MAD (median absolute deviation) of `v` (upper median for an even count), computed
+/// in place: `v` is reordered and left holding the absolute deviations. `(0, 0)` if empty.
+pub(crate) fn median_mad_in_place(v: &mut [f64]) -> (f64, f64) {
+    if v.is_empty() {
         return (0.0, 0.0);
     }
-    let mid = w.len() / 2;
-    let med = *w.select_nth_unstable_by(mid, f64::total_cmp).1;
-    for x in &mut w {
+    let mid = v.len() / 2;
+    let med = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+    for x in v.iter_mut() {
         *x = (*x - med).abs();
     }
-    let mad = *w.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let mad = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
     (med, mad)
 }
 
