@@ -35,7 +35,8 @@ pub struct DetectArgs {
     #[arg(long, value_name = "DIR")]
     draw_dir: Option<PathBuf>,
     /// How corners are placed: `local` (single-corner refiner) or `board` (row and column curves
-    /// fitted along the whole board, local where a line has too few samples).
+    /// fitted along the whole board, local where a line has too few samples). Corners the local
+    /// refiner fails on, and doubtful board answers, take the gradient estimate (path `gradient`).
     #[arg(long = "refine", value_name = "MODE", default_value = "board", value_parser = ["local", "board"])]
     mode: String,
     /// Print CSV rows (image,board,row,col,x,y,score,status) instead of JSON.

@@ -35,11 +35,14 @@ const FAILED: u8 = 0;
 const PATH_LOCAL: u8 = 0;
 /// Path code of a corner placed by the board-wide row and column curves.
 const PATH_BOARD: u8 = 1;
+/// Path code of a corner placed by the gradient-orthogonality estimate (last resort).
+const PATH_GRADIENT: u8 = 2;
 
 fn path_code(p: Path) -> u8 {
     match p {
         Path::Local => PATH_LOCAL,
         Path::Board => PATH_BOARD,
+        Path::Gradient => PATH_GRADIENT,
     }
 }
 
@@ -401,5 +404,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CONVERGED", CONVERGED)?;
     m.add("PATH_LOCAL", PATH_LOCAL)?;
     m.add("PATH_BOARD", PATH_BOARD)?;
+    m.add("PATH_GRADIENT", PATH_GRADIENT)?;
     Ok(())
 }

@@ -55,17 +55,18 @@ def test_both_modes_find_the_same_corners(detections):
 
 
 def test_local_mode_has_local_paths_and_no_sigma(detections):
+    # Only corners the local refiner fails on go to the gradient estimate.
     for name, _, local, _ in detections:
-        assert (local.paths == cc.PATH_LOCAL).all(), name
+        assert (local.paths == cc.PATH_LOCAL).mean() > 0.9, name
+        assert set(local.path_names) <= {"local", "gradient"}, name
         assert np.isnan(local.sigmas).all(), name
         assert local.paths.dtype == np.uint8 and local.sigmas.dtype == np.float64
-        assert set(local.path_names) == {"local"}
 
 
 def test_sigma_finite_positive_exactly_on_board_path(detections):
     for name, _, _, fitted in detections:
         on_board = fitted.paths == cc.PATH_BOARD
-        assert set(fitted.paths.tolist()) <= {cc.PATH_LOCAL, cc.PATH_BOARD}
+        assert set(fitted.paths.tolist()) <= {cc.PATH_LOCAL, cc.PATH_BOARD, cc.PATH_GRADIENT}
         assert on_board.mean() > 0.8, f"{name}: only {on_board.sum()}/{len(fitted)} board-fitted"
         s = fitted.sigmas
         assert (np.isfinite(s[on_board]) & (s[on_board] > 0)).all(), name

@@ -116,6 +116,9 @@ pub enum Path {
     Board,
     /// The local refiner's answer (the input position), kept for the [`Fallback`] reason given.
     Local,
+    /// The gradient-orthogonality estimate ([`crate::gradient`]): set by [`crate::detect`] where
+    /// the edge walks found too little to fit, or where the board-wide answer was doubtful.
+    Gradient,
 }
 
 /// Why a corner kept its local answer.
@@ -1268,6 +1271,7 @@ mod tests {
                     ));
                 }
                 Path::Local => st.local += 1,
+                Path::Gradient => unreachable!("only detect sets the gradient path"),
             }
         }
         (board, fitted, st)

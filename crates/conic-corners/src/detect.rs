@@ -9,6 +9,7 @@ use crate::connectivity::{
     connect, label_with, Board as LabelledBoard, ConnectivityParams, LabelParams,
 };
 use crate::election::{elect, Corner, ElectionParams};
+use crate::gradient::{refine_gradient, GradientParams};
 use crate::prefilter::{prefilter, PrefilterParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::GrayImage;
@@ -36,6 +37,16 @@ pub struct DetectParams {
     pub mode: RefineMode,
     /// Board-wide fitting (III-D to III-F along whole grid lines), for [`RefineMode::Board`].
     pub board_fit: BoardFitParams,
+    /// The last-resort refiner ([`crate::gradient`]): it places the corners that the local
+    /// refiner fails on, and checks the board-wide answers.
+    pub gradient: GradientParams,
+    /// A board-wide answer whose σ exceeds this (px) is replaced by the gradient estimate: the
+    /// fit itself then says it is worse than the gradient estimate's typical error (a median of
+    /// 0.03 px). It is also replaced where the two disagree by more than
+    /// `max(3σ, 0.2 px)`, the floor being several times the gradient estimate's own error. Both
+    /// happen at the ends of grid lines near a silhouette, where the squares are foreshortened
+    /// to a few pixels and the curves are extrapolated. `∞` keeps every board-wide answer.
+    pub max_board_sigma: f64,
 }
 
 /// How [`detect`] places the corners after the pixel-level detection.
@@ -70,6 +81,8 @@ impl Default for DetectParams {
                 stride: 2,
                 ..BoardFitParams::default()
             },
+            gradient: GradientParams::default(),
+            max_board_sigma: 0.05,
         }
     }
 }
@@ -94,6 +107,13 @@ impl DetectParams {
                 "the pre-filter scale sigma must be in 0.5..=32 px, got {sigma}"
             ));
         }
+        if !(self.max_board_sigma > 0.0) {
+            return Err(format!(
+                "the largest board-wide sigma must be positive, got {}",
+                self.max_board_sigma
+            ));
+        }
+        self.gradient.validate()?;
         self.refine.validate()
     }
 }
@@ -111,7 +131,9 @@ pub struct DetectedCorner {
     pub col: i32,
     /// Template-matching score of the corner (normalized cross-correlation).
     pub score: f64,
-    /// How the subpixel position was obtained; `Failed` keeps the pixel-level position.
+    /// How the subpixel position was obtained: `Converged` for board-wide answers and the local
+    /// refiner's full answers, `Fallback` for its answers with less support and for the gradient
+    /// estimate, `Failed` keeps the pixel-level position.
     pub status: Status,
     /// RMS distance (px) of the edge samples to their curves; `None` when not refined.
     pub residual: Option<f64>,
@@ -213,20 +235,29 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             .enumerate()
             .map(
                 |(k, (&i, &(row, col)))| match fitted.as_ref().map(|f| &f[k]) {
-                    Some(f) if f.path == Path::Board => DetectedCorner {
-                        x: f.x,
-                        y: f.y,
-                        status: Status::Converged,
-                        path: Path::Board,
-                        sigma: Some(f.sigma),
-                        ..pixel_corner(&corners[i], row, col)
-                    },
+                    Some(f) if f.path == Path::Board => {
+                        let board = DetectedCorner {
+                            x: f.x,
+                            y: f.y,
+                            status: Status::Converged,
+                            path: Path::Board,
+                            sigma: Some(f.sigma),
+                            ..pixel_corner(&corners[i], row, col)
+                        };
+                        check_board_answer(image, board, params)
+                    }
                     _ => {
                         let reach = match graph.neighbours.get(i) {
                             Some(nb) => neighbour_reach(&corners, nb, i),
                             None => label_reach(&corners, b, i),
                         };
-                        refine_corner(image, &corners[i], row, col, reach, &params.refine)
+                        let local =
+                            refine_corner(image, &corners[i], row, col, reach, &params.refine);
+                        if local.status == Status::Failed {
+                            gradient_corner(image, local, &params.gradient).unwrap_or(local)
+                        } else {
+                            local
+                        }
                     }
                 },
             )
@@ -276,6 +307,47 @@ fn label_reach(corners: &[Corner], board: &LabelledBoard, i: usize) -> Option<f6
         .filter(|(_, &(lr, lc))| (lr - r).abs() + (lc - c).abs() == 1)
         .map(|(&j, _)| (corners[j].x - c0.x).hypot(corners[j].y - c0.y))
         .max_by(f64::total_cmp)
+}
+
+/// Disagreement (px) between a board-wide answer and the gradient estimate below which the
+/// board-wide answer always stands; see [`DetectParams::max_board_sigma`].
+const DISAGREEMENT_FLOOR_PX: f64 = 0.2;
+
+/// Keeps a board-wide answer unless it is doubtful (see [`DetectParams::max_board_sigma`]) and
+/// the gradient estimate exists.
+fn check_board_answer(
+    image: &GrayImage,
+    board: DetectedCorner,
+    params: &DetectParams,
+) -> DetectedCorner {
+    let sigma = board.sigma.unwrap_or(f64::INFINITY);
+    let Some(g) = gradient_corner(image, board, &params.gradient) else {
+        return board;
+    };
+    let apart = (g.x - board.x).hypot(g.y - board.y);
+    if sigma > params.max_board_sigma || apart > (3.0 * sigma).max(DISAGREEMENT_FLOOR_PX) {
+        g
+    } else {
+        board
+    }
+}
+
+/// `c` placed by the gradient estimate started from its position, if that converges.
+fn gradient_corner(
+    image: &GrayImage,
+    c: DetectedCorner,
+    params: &GradientParams,
+) -> Option<DetectedCorner> {
+    let [x, y] = refine_gradient(image, [c.x, c.y], params)?;
+    Some(DetectedCorner {
+        x,
+        y,
+        status: Status::Fallback,
+        residual: None,
+        path: Path::Gradient,
+        sigma: None,
+        ..c
+    })
 }
 
 /// A labelled corner at its pixel-level (elected) position, not yet refined.

@@ -15,6 +15,8 @@
 //! | sigmoid subpixel edge sampling (III-D) | [`edge_sampling`] |
 //! | sample-chain segmentation (III-E) | [`segmentation`] |
 //! | conic / line fitting and intersection (III-F) | [`quadratic_form`] |
+//! | the same along whole grid lines (III-D to III-F) | [`board_fit`] |
+//! | last-resort gradient-orthogonality refinement | [`gradient`] |
 //!
 //! [`detect`] runs the whole pipeline on an image.
 //! [`refine`] combines edge sampling and quadratic-form fitting into a single-corner refiner (a more
@@ -29,6 +31,7 @@ pub mod connectivity;
 pub mod detect;
 pub mod edge_sampling;
 pub mod election;
+pub mod gradient;
 pub mod image;
 pub mod prefilter;
 pub mod quadratic_form;

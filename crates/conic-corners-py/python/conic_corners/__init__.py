@@ -23,10 +23,13 @@ Status codes (``Board.status``, the second result of :func:`refine`): :data:`FAI
 position is returned), :data:`FALLBACK` (1, less support: an edge seen on one side only, or
 straight lines instead of curves), :data:`CONVERGED` (2).
 
-Path codes (``Board.paths``): :data:`PATH_LOCAL` (0, placed by the single-corner refiner) and
+Path codes (``Board.paths``): :data:`PATH_LOCAL` (0, placed by the single-corner refiner),
 :data:`PATH_BOARD` (1, the intersection of the row and column curves fitted along the whole board,
-with ``Board.sigmas`` its standard deviation); :func:`detect` fits board-wide by default and falls
-back to the local refiner per corner where a grid line has too few samples.
+with ``Board.sigmas`` its standard deviation) and :data:`PATH_GRADIENT` (2, the
+gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort); :func:`detect`
+fits board-wide by default and falls back to the local refiner per corner where a grid line has too
+few samples, and to the gradient estimate where the local refiner fails or the board-wide answer is
+doubtful (foreshortened squares at a silhouette).
 
 Errors: a wrong dtype raises ``TypeError``; a wrong shape, an empty array, non-finite values or an
 out-of-range parameter raise ``ValueError``.
@@ -51,6 +54,7 @@ __all__ = [
     "STATUS_NAMES",
     "PATH_LOCAL",
     "PATH_BOARD",
+    "PATH_GRADIENT",
     "PATH_NAMES",
 ]
 
@@ -61,8 +65,9 @@ CONVERGED: int = _native.CONVERGED
 STATUS_NAMES: Tuple[str, str, str] = ("failed", "fallback", "converged")
 PATH_LOCAL: int = _native.PATH_LOCAL
 PATH_BOARD: int = _native.PATH_BOARD
-#: Path code → name, the names the CLI prints in its JSON ("local", "board").
-PATH_NAMES: Tuple[str, str] = ("local", "board")
+PATH_GRADIENT: int = _native.PATH_GRADIENT
+#: Path code → name, the names the CLI prints in its JSON ("local", "board", "gradient").
+PATH_NAMES: Tuple[str, str, str] = ("local", "board", "gradient")
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,9 +86,9 @@ class Board:
             NaN where the corner was not refined.
         paths: N ``uint8`` path codes: :data:`PATH_BOARD` where the corner is the intersection
             of its board-wide row and column curves, :data:`PATH_LOCAL` where the single-corner
-            refiner placed it (every corner with ``refine="local"``).
+            refiner placed it, :data:`PATH_GRADIENT` where the gradient estimate did.
         sigmas: N ``float64`` standard deviations (px) of the position in its worst direction,
-            from the board-wide fit's residuals; NaN where ``paths`` is :data:`PATH_LOCAL`.
+            from the board-wide fit's residuals; NaN unless ``paths`` is :data:`PATH_BOARD`.
 
     A board may have holes (occluded corners), so ``len(board)`` can be less than ``rows * cols``.
     """

@@ -20,8 +20,10 @@ PATH_LOCAL: int
 """Path 0: placed by the single-corner refiner."""
 PATH_BOARD: int
 """Path 1: intersection of the board-wide row and column curves."""
-PATH_NAMES: Tuple[str, str]
-"""Path code -> name ("local", "board")."""
+PATH_GRADIENT: int
+"""Path 2: placed by the gradient-orthogonality estimate (last resort)."""
+PATH_NAMES: Tuple[str, str, str]
+"""Path code -> name ("local", "board", "gradient")."""
 
 class Board:
     """One detected board: its labelled corners sorted by (row, col)."""
@@ -39,9 +41,9 @@ class Board:
     residuals: npt.NDArray[np.float64]
     """N RMS fit residuals in px, NaN where not refined."""
     paths: npt.NDArray[np.uint8]
-    """N path codes (PATH_LOCAL, PATH_BOARD)."""
+    """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT)."""
     sigmas: npt.NDArray[np.float64]
-    """N standard deviations (px, worst direction) of board-fitted positions, NaN where local."""
+    """N standard deviations (px, worst direction) of board-fitted positions, NaN elsewhere."""
     def __init__(
         self,
         rows: int,
