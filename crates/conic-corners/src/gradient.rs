@@ -43,7 +43,7 @@ impl Default for GradientParams {
             window_sigma: 3.5,
             smoothing: 0.7,
             max_iterations: 20,
-            max_shift: 3.0,
+            max_shift: 1.5,
         }
     }
 }

@@ -354,3 +354,63 @@ fn completion_restores_corners_the_election_rejects() {
     assert_eq!(det.boards.len(), 1);
     assert!(with.rms < RMS_BOUND, "{}", with.rms);
 }
+
+/// Boards wrapped far round thin cylinders, so that the outer columns are foreshortened to a few
+/// pixels next to the silhouette: there the local refiner fails and some board-wide answers are
+/// doubtful (short, extrapolated curves), and those corners take the gradient estimate. On a
+/// fixed family of scenes, every gradient corner is within 0.5 px of the truth and the total
+/// squared error is below that of the pipeline without the gradient estimate (0.0071 against
+/// 0.0086 px² summed over the scenes' RMS² when this was written). Per corner it is no sure
+/// gain: the gradient estimate is 0.07–0.45 px off at such corners, the answers it replaces
+/// 0.004–0.23 px.
+#[test]
+fn gradient_estimate_at_foreshortened_silhouettes() {
+    use conic_corners::board_fit::Path;
+    let without = DetectParams {
+        gradient: None,
+        max_board_sigma: f64::INFINITY,
+        ..DetectParams::default()
+    };
+    let (mut with_sq, mut without_sq, mut used) = (0.0, 0.0, 0);
+    for seed in 20..26u64 {
+        for (radius_mm, square_mm) in [(45.0, 13.0), (50.0, 15.0)] {
+            let s = scene(Surface::Cylinder { radius_mm }, seed, |t| {
+                t.square_mm = square_mm;
+                t.rows = 7;
+                t.cols = 9;
+            });
+            let r = s.render(seed).expect("valid scene");
+            let what = format!("seed {seed}, radius {radius_mm}");
+            let det = detect(&r.image, &DetectParams::default());
+            let o = check(&what, &det, &r.corners);
+            let o_without = check(&what, &detect(&r.image, &without), &r.corners);
+            assert_eq!(o.missing, o_without.missing, "{what}");
+            with_sq += o.rms * o.rms;
+            without_sq += o_without.rms * o_without.rms;
+            for c in det.boards.iter().flat_map(|b| &b.corners) {
+                if c.path != Path::Gradient {
+                    continue;
+                }
+                used += 1;
+                let e = r
+                    .corners
+                    .iter()
+                    .filter(|t| t.x.is_finite())
+                    .map(|t| (t.x - c.x).hypot(t.y - c.y))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(
+                    e < 0.5,
+                    "{what}: gradient corner ({}, {}) {e} px off",
+                    c.row,
+                    c.col
+                );
+            }
+        }
+    }
+    eprintln!("gradient corners {used}; summed RMS² {with_sq:.5} against {without_sq:.5} px²");
+    assert!(
+        used >= 5,
+        "the scenes must exercise the gradient path ({used})"
+    );
+    assert!(with_sq < without_sq, "{with_sq} against {without_sq}");
+}
