@@ -34,8 +34,8 @@
 //!    fit fails, the curves do not meet or meet nearly tangentially, or the intersection is far
 //!    from the local position.
 //!
-//! **Uncertainty.** Each piece's position across the curve at the corner has variance
-//! `s² φ(u)ᵀ (ΦᵀΦ)⁻¹ φ(u)`: `s²` the residual variance of the kept samples (their squared
+//! **Uncertainty** (computed by `quadratic_form`'s helpers, shared with the local refiner). Each
+//! piece's position across the curve at the corner has variance `s² φ(u)ᵀ (ΦᵀΦ)⁻¹ φ(u)`: `s²` the residual variance of the kept samples (their squared
 //! distances over `n − k`), `Φ` the design matrix of the samples in the piece's principal frame
 //! with the polynomial basis of the selected model (`1, u` for a line, `1, u, u²` for a parabola,
 //! `1, u, …, u⁴` for a conic, whose two extra coefficients act like `u³`, `u⁴` along a nearly
@@ -51,11 +51,11 @@ use crate::edge_sampling::{
     blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, SigmoidParams,
 };
 use crate::quadratic_form::{
-    edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve, EdgeModel,
+    corner_covariance, edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve,
+    EdgeModel, PositionStats,
 };
 use crate::segmentation::{median_mad_in_place, segment_chain, SegmentationParams};
 use crate::GrayImage;
-use nalgebra::{Matrix5, Vector5};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::ops::Range;
@@ -691,23 +691,6 @@ fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
     blur_sigma_from_widths(&widths)
 }
 
-/// Per piece: what the corner covariance needs.
-#[derive(Clone)]
-struct SegmentStats {
-    /// Principal frame of the kept samples: centre, unit tangent, scale (RMS extent).
-    centre: [f64; 2],
-    tangent: [f64; 2],
-    scale: f64,
-    /// `(ΦᵀΦ)⁻¹` (unused dimensions are identity and never touched by `φ`).
-    inverse: Matrix5<f64>,
-    /// Polynomial degree of the basis (1, 2 or 4).
-    degree: usize,
-    /// Residual variance `s²` (px²).
-    s2: f64,
-    /// Positions along the chain (sample indices) of the kept samples.
-    kept: Vec<usize>,
-}
-
 /// Samples one line, segments its chain, fits every piece (for drawing). Returns the line and
 /// the chain position of each corner: `(corner, samples before it)`.
 fn sample_and_fit_line(
@@ -755,7 +738,7 @@ fn sample_and_fit_line(
         };
         segments.push(FittedSegment {
             samples: (r.start, r.end),
-            fit: fitted.as_ref().map(|f| (f.0, f.1, f.2, f.3.kept.len())),
+            fit: fitted.as_ref().map(|f| (f.0, f.1, f.2, f.4)),
         });
     }
     (
@@ -885,28 +868,6 @@ fn extension_walk(grid: &Grid, e: usize, n: usize, k: usize) -> Option<Walk> {
     })
 }
 
-impl SegmentStats {
-    /// Variance (px²) of the curve's position across itself at `p`.
-    fn variance_at(&self, p: [f64; 2]) -> f64 {
-        let u = ((p[0] - self.centre[0]) * self.tangent[0]
-            + (p[1] - self.centre[1]) * self.tangent[1])
-            / self.scale;
-        let phi = basis(u, self.degree);
-        self.s2 * (phi.transpose() * self.inverse * phi)[0]
-    }
-}
-
-/// `(1, u, …, u^degree, 0, …)`.
-fn basis(u: f64, degree: usize) -> Vector5<f64> {
-    let mut phi = Vector5::zeros();
-    let mut v = 1.0;
-    for k in 0..=degree.min(4) {
-        phi[k] = v;
-        v *= u;
-    }
-    phi
-}
-
 /// Fits one piece with outlier rejection: samples farther than `max(3.5 · 1.4826 · MAD, 0.05 px)`
 /// from the curve are dropped and the fit repeated (rejected samples may come back) until the kept
 /// set stops changing, at most five times. Returns the curve, its model, the RMS of the kept
@@ -917,7 +878,7 @@ fn robust_fit(
     range: Range<usize>,
     guard: BranchGuard,
     scratch: &mut Vec<[f64; 2]>,
-) -> Option<(Curve, EdgeModel, f64, SegmentStats)> {
+) -> Option<(Curve, EdgeModel, f64, PositionStats, usize)> {
     let mut kept: Vec<usize> = range.clone().collect();
     let mut dev: Vec<f64> = Vec::with_capacity(range.len());
     let mut fit = None;
@@ -951,72 +912,8 @@ fn robust_fit(
     if kept.len() < 3 {
         return None;
     }
-    let stats = segment_stats(pts, kept, &f.curve, f.model)?;
-    Some((f.curve, f.model, f.rms, stats))
-}
-
-/// The covariance ingredients of a fitted piece; see [`SegmentStats`].
-fn segment_stats(
-    pts: &[[f64; 2]],
-    kept: Vec<usize>,
-    curve: &Curve,
-    model: EdgeModel,
-) -> Option<SegmentStats> {
-    let n = kept.len() as f64;
-    let (mut mx, mut my) = (0.0, 0.0);
-    for &i in &kept {
-        mx += pts[i][0];
-        my += pts[i][1];
-    }
-    let (mx, my) = (mx / n, my / n);
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for &i in &kept {
-        let (dx, dy) = (pts[i][0] - mx, pts[i][1] - my);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let t = [theta.cos(), theta.sin()];
-    let var_t = (sxx * t[0] * t[0] + 2.0 * sxy * t[0] * t[1] + syy * t[1] * t[1]) / n;
-    let scale = var_t.sqrt();
-    if scale.is_nan() || scale <= 0.0 {
-        return None;
-    }
-    let degree = match model {
-        EdgeModel::Line => 1,
-        EdgeModel::Parabola => 2,
-        EdgeModel::Conic => 4,
-    };
-    let params = if model == EdgeModel::Conic {
-        5.0
-    } else {
-        degree as f64 + 1.0
-    };
-    let mut gram = Matrix5::zeros();
-    let mut rss = 0.0;
-    for &i in &kept {
-        let u = ((pts[i][0] - mx) * t[0] + (pts[i][1] - my) * t[1]) / scale;
-        let phi = basis(u, degree);
-        gram += phi * phi.transpose();
-        rss += curve.distance(pts[i][0], pts[i][1]).powi(2);
-    }
-    for k in degree + 1..5 {
-        gram[(k, k)] = 1.0;
-    }
-    let inverse = gram.try_inverse()?;
-    if n <= params {
-        return None;
-    }
-    Some(SegmentStats {
-        centre: [mx, my],
-        tangent: t,
-        scale,
-        inverse,
-        degree,
-        s2: rss / (n - params),
-        kept,
-    })
+    let stats = PositionStats::new(kept.iter().map(|&i| &pts[i]), &f.curve, f.model)?;
+    Some((f.curve, f.model, f.rms, stats, kept.len()))
 }
 
 /// Separation (px) that a corner's curve must keep from its conic's second branch near the
@@ -1074,12 +971,12 @@ fn choose_segment(
             continue;
         }
         enough = true;
-        let Some((curve, _, _, st)) =
+        let Some((curve, _, _, st, kept)) =
             robust_fit(&line.samples, lo..hi + 1, near_corner(p), &mut scratch)
         else {
             continue;
         };
-        if st.kept.len() < min_near {
+        if kept < min_near {
             continue;
         }
         let variance = st.variance_at(p);
@@ -1102,14 +999,6 @@ fn choose_segment(
     }
 }
 
-/// Unit normal of a curve at `p`.
-fn curve_normal(c: &Curve, p: [f64; 2]) -> Option<[f64; 2]> {
-    match c {
-        Curve::Line(l) => Some(l.normal()),
-        Curve::Conic(q) => normalize(q.gradient(p[0], p[1])),
-    }
-}
-
 fn intersect_corner(
     row: i32,
     col: i32,
@@ -1128,32 +1017,19 @@ fn intersect_corner(
     if dist(p, local) > params.max_shift {
         return fallback(Fallback::TooFar);
     }
-    let (Some(n1), Some(n2)) = (curve_normal(&a.curve, p), curve_normal(&b.curve, p)) else {
-        return fallback(Fallback::NoIntersection);
-    };
-    let det = n1[0] * n2[1] - n1[1] * n2[0];
-    if det.abs() < params.min_angle_deg.to_radians().sin() {
+    // `None`: a normal is undefined or the curves are parallel at `p`.
+    let Some(c) = corner_covariance(
+        &a.curve,
+        a.variance,
+        &b.curve,
+        b.variance,
+        p,
+        params.systematic_sigma,
+    ) else {
         return fallback(Fallback::Tangent);
-    }
-    // N⁻¹ for N = [n1ᵀ; n2ᵀ]; its columns map a shift of each curve to the corner's shift.
-    let inv = [[n2[1] / det, -n1[1] / det], [-n2[0] / det, n1[0] / det]];
-    let (v1, v2) = (a.variance, b.variance);
-    let s2 = params.systematic_sigma.max(0.0).powi(2);
-    let mut cov = [[0.0; 2]; 2];
-    for (r, row_c) in cov.iter_mut().enumerate() {
-        for (c, v) in row_c.iter_mut().enumerate() {
-            *v = inv[r][0] * inv[c][0] * v1
-                + inv[r][1] * inv[c][1] * v2
-                + if r == c { s2 } else { 0.0 };
-        }
-    }
-    let (tr, dt) = (
-        cov[0][0] + cov[1][1],
-        cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0],
-    );
-    let big = 0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt();
-    if !big.is_finite() {
-        return fallback(Fallback::FitFailed);
+    };
+    if c.sin_angle < params.min_angle_deg.to_radians().sin() {
+        return fallback(Fallback::Tangent);
     }
     FittedCorner {
         row,
@@ -1162,8 +1038,8 @@ fn intersect_corner(
         y: p[1],
         path: Path::Board,
         fallback: None,
-        cov,
-        sigma: big.sqrt(),
+        cov: c.cov,
+        sigma: c.sigma,
     }
 }
 

@@ -1309,6 +1309,169 @@ pub fn nearest_intersection(a: &Curve, b: &Curve, near: [f64; 2]) -> Option<[f64
     })
 }
 
+/// How well a fitted curve pins its own position: the variance of its position across itself
+/// along the data. With `Φ` the design matrix of the samples in their principal frame (centre,
+/// unit tangent, RMS extent as the unit of `u`) with the polynomial basis of the model (`1, u` for
+/// a line, `1, u, u²` for a parabola, `1, u, …, u⁴` for a conic, whose two extra coefficients act
+/// like `u³`, `u⁴` along a nearly straight edge) and `s²` the residual variance (squared distances
+/// over `n − k`), the curve's position at `u` has variance `s² φ(u)ᵀ (ΦᵀΦ)⁻¹ φ(u)`.
+#[derive(Clone, Debug)]
+pub(crate) struct PositionStats {
+    centre: [f64; 2],
+    tangent: [f64; 2],
+    scale: f64,
+    /// `(ΦᵀΦ)⁻¹` (unused dimensions are identity and never touched by `φ`).
+    inverse: Matrix5<f64>,
+    degree: usize,
+    s2: f64,
+}
+
+impl PositionStats {
+    /// The statistics of `curve` (of `model`) fitted to `points`; `None` with too few points for
+    /// the model or degenerate ones.
+    pub(crate) fn new<'a>(
+        points: impl Iterator<Item = &'a [f64; 2]> + Clone,
+        curve: &Curve,
+        model: EdgeModel,
+    ) -> Option<Self> {
+        let (mut n, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for p in points.clone() {
+            n += 1.0;
+            mx += p[0];
+            my += p[1];
+        }
+        if n < 1.0 {
+            return None;
+        }
+        let (mx, my) = (mx / n, my / n);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        for p in points.clone() {
+            let (dx, dy) = (p[0] - mx, p[1] - my);
+            sxx += dx * dx;
+            sxy += dx * dy;
+            syy += dy * dy;
+        }
+        let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+        let t = [theta.cos(), theta.sin()];
+        let scale = ((sxx * t[0] * t[0] + 2.0 * sxy * t[0] * t[1] + syy * t[1] * t[1]) / n).sqrt();
+        if scale.is_nan() || scale <= 0.0 {
+            return None;
+        }
+        let degree = match model {
+            EdgeModel::Line => 1,
+            EdgeModel::Parabola => 2,
+            EdgeModel::Conic => 4,
+        };
+        let params = if model == EdgeModel::Conic {
+            5.0
+        } else {
+            degree as f64 + 1.0
+        };
+        if n <= params {
+            return None;
+        }
+        let mut gram = Matrix5::zeros();
+        let mut rss = 0.0;
+        for p in points {
+            let u = ((p[0] - mx) * t[0] + (p[1] - my) * t[1]) / scale;
+            let phi = basis(u, degree);
+            gram += phi * phi.transpose();
+            rss += curve.distance(p[0], p[1]).powi(2);
+        }
+        for k in degree + 1..5 {
+            gram[(k, k)] = 1.0;
+        }
+        Some(Self {
+            centre: [mx, my],
+            tangent: t,
+            scale,
+            inverse: gram.try_inverse()?,
+            degree,
+            s2: rss / (n - params),
+        })
+    }
+
+    /// Variance (px²) of the curve's position across itself at `p`.
+    pub(crate) fn variance_at(&self, p: [f64; 2]) -> f64 {
+        let u = ((p[0] - self.centre[0]) * self.tangent[0]
+            + (p[1] - self.centre[1]) * self.tangent[1])
+            / self.scale;
+        let phi = basis(u, self.degree);
+        self.s2 * (phi.transpose() * self.inverse * phi)[0]
+    }
+}
+
+/// `(1, u, …, u^degree, 0, …)`.
+fn basis(u: f64, degree: usize) -> Vector5<f64> {
+    let mut phi = Vector5::zeros();
+    let mut v = 1.0;
+    for k in 0..=degree.min(4) {
+        phi[k] = v;
+        v *= u;
+    }
+    phi
+}
+
+/// The covariance of the intersection `p` of two curves whose positions across themselves have
+/// variances `v₁`, `v₂` there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct CornerCovariance {
+    /// Covariance (px²) of `(x, y)`.
+    pub cov: [[f64; 2]; 2],
+    /// Standard deviation (px) in the worst direction: the square root of `cov`'s largest
+    /// eigenvalue.
+    pub sigma: f64,
+    /// `|sin|` of the angle between the curves at `p`.
+    pub sin_angle: f64,
+}
+
+/// Shifting the two curves by `δ₁`, `δ₂` along their unit normals `n₁`, `n₂` moves their
+/// intersection by `N⁻¹ δ` with `N = [n₁ᵀ; n₂ᵀ]`, so the corner's covariance is
+/// `N⁻¹ diag(v₁, v₂) N⁻ᵀ + σ_sys² I`, with `σ_sys` for the model errors the residuals do not show.
+/// `None` if a normal is undefined, the curves are parallel at `p` or a result is not finite.
+pub(crate) fn corner_covariance(
+    a: &Curve,
+    v1: f64,
+    b: &Curve,
+    v2: f64,
+    p: [f64; 2],
+    systematic_sigma: f64,
+) -> Option<CornerCovariance> {
+    let normal = |c: &Curve| -> Option<[f64; 2]> {
+        let n = match c {
+            Curve::Line(l) => l.normal(),
+            Curve::Conic(q) => q.gradient(p[0], p[1]),
+        };
+        let len = n[0].hypot(n[1]);
+        (len > 0.0 && len.is_finite()).then(|| [n[0] / len, n[1] / len])
+    };
+    let (n1, n2) = (normal(a)?, normal(b)?);
+    let det = n1[0] * n2[1] - n1[1] * n2[0];
+    if det == 0.0 {
+        return None;
+    }
+    let inv = [[n2[1] / det, -n1[1] / det], [-n2[0] / det, n1[0] / det]];
+    let s2 = systematic_sigma.max(0.0).powi(2);
+    let mut cov = [[0.0; 2]; 2];
+    for (r, row) in cov.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = inv[r][0] * inv[c][0] * v1
+                + inv[r][1] * inv[c][1] * v2
+                + if r == c { s2 } else { 0.0 };
+        }
+    }
+    let (tr, dt) = (
+        cov[0][0] + cov[1][1],
+        cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0],
+    );
+    let sigma = (0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt()).sqrt();
+    sigma.is_finite().then_some(CornerCovariance {
+        cov,
+        sigma,
+        sin_angle: det.abs(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
