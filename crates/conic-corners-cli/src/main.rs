@@ -96,6 +96,7 @@ struct CornerOut {
     y: f64,
     status: conic_corners::refine::Status,
     residual: Option<f64>,
+    sigma: Option<f64>,
 }
 
 impl From<Refined> for CornerOut {
@@ -105,6 +106,7 @@ impl From<Refined> for CornerOut {
             y: r.y,
             status: r.status,
             residual: r.residual,
+            sigma: r.sigma,
         }
     }
 }

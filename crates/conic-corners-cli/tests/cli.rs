@@ -238,6 +238,10 @@ fn colour_and_sixteen_bit_images_are_read_as_grey() {
             .unwrap();
         let v = stdout_json(&out);
         assert_eq!(v["corners"][0]["status"], "converged", "{}", path.display());
+        let sigma = v["corners"][0]["sigma"]
+            .as_f64()
+            .expect("a converged corner has a sigma");
+        assert!(sigma > 0.0 && sigma < 0.1, "{sigma}");
         assert!((v["corners"][0]["x"].as_f64().unwrap() - 100.3).abs() < 0.05);
     }
 }

@@ -52,7 +52,7 @@ use crate::edge_sampling::{
 };
 use crate::quadratic_form::{
     corner_covariance, edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve,
-    EdgeModel, PositionStats,
+    EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::{median_mad_in_place, segment_chain, SegmentationParams};
 use crate::GrayImage;
@@ -102,7 +102,7 @@ impl Default for BoardFitParams {
             near_squares: 2.0,
             max_shift: 1.5,
             min_angle_deg: 10.0,
-            systematic_sigma: 0.002,
+            systematic_sigma: SAMPLE_BIAS_SIGMA_PX,
             local_sigma: 0.1,
         }
     }

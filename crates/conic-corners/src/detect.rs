@@ -143,8 +143,10 @@ pub struct DetectedCorner {
     pub residual: Option<f64>,
     /// Which refiner placed the corner.
     pub path: Path,
-    /// Standard deviation (px) of the position in its worst direction, from the board-wide fit's
-    /// residuals; `None` in [`RefineMode::Local`].
+    /// Standard deviation (px) of the position in its worst direction, propagated from the
+    /// residuals of the fits that placed it (board-wide or local curves, or the gradient
+    /// estimate, whose σ is conservative); `None` when refinement failed or the local refiner's
+    /// curves did not meet.
     pub sigma: Option<f64>,
 }
 
@@ -340,14 +342,14 @@ fn gradient_corner(
     c: DetectedCorner,
     params: &GradientParams,
 ) -> Option<DetectedCorner> {
-    let [x, y] = refine_gradient(image, [c.x, c.y], params)?;
+    let g = refine_gradient(image, [c.x, c.y], params)?;
     Some(DetectedCorner {
-        x,
-        y,
+        x: g.point[0],
+        y: g.point[1],
         status: Status::Fallback,
         residual: None,
         path: Path::Gradient,
-        sigma: None,
+        sigma: Some(g.sigma),
         ..c
     })
 }
@@ -385,6 +387,7 @@ fn refine_corner(
         y: r.y,
         status: r.status,
         residual: r.residual,
+        sigma: r.sigma,
         ..pixel_corner(c, row, col)
     }
 }

@@ -1309,6 +1309,10 @@ pub fn nearest_intersection(a: &Curve, b: &Curve, near: [f64; 2]) -> Option<[f64
     })
 }
 
+/// Floor σ_sys (px) for the model errors that fit residuals do not show: the sigmoid samples' bias
+/// from pixel sampling, measured on noise-free renders.
+pub(crate) const SAMPLE_BIAS_SIGMA_PX: f64 = 0.002;
+
 /// How well a fitted curve pins its own position: the variance of its position across itself
 /// along the data. With `Φ` the design matrix of the samples in their principal frame (centre,
 /// unit tangent, RMS extent as the unit of `u`) with the polynomial basis of the model (`1, u` for

@@ -29,7 +29,8 @@ use crate::edge_sampling::{
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
-    fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
+    corner_covariance, fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
+    CurveFit, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;
@@ -117,6 +118,10 @@ pub struct Refined {
     pub status: Status,
     /// RMS distance (px) of the edge samples to their fitted curves; `None` when failed.
     pub residual: Option<f64>,
+    /// Standard deviation (px) of the position in its worst direction, propagated from the
+    /// residuals of the two curve fits (as in [`crate::board_fit`]); `None` when failed or when
+    /// the curves did not meet and straight lines stood in.
+    pub sigma: Option<f64>,
     /// Edge samples used by the two curve fits.
     pub samples: usize,
 }
@@ -138,6 +143,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
         y: start[1],
         status: Status::Failed,
         residual: None,
+        sigma: None,
         samples: 0,
     };
     if params.validate().is_err()
@@ -187,6 +193,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
             y: sol.point[1],
             status: sol.status,
             residual: Some(sol.residual),
+            sigma: sol.sigma,
             samples: sol.samples,
         },
         _ => failed,
@@ -346,6 +353,9 @@ struct Walks {
 
 struct Solution {
     point: [f64; 2],
+    /// Standard deviation (px, worst direction) of `point` from the two curve fits, when they
+    /// intersect.
+    sigma: Option<f64>,
     status: Status,
     residual: f64,
     samples: usize,
@@ -451,6 +461,7 @@ impl Walks {
         sigma: Option<f64>,
     ) -> Option<Solution> {
         let mut curves: [Option<Curve>; 2] = [None, None];
+        let mut stats: [Option<PositionStats>; 2] = [None, None];
         let mut lines = [None, None];
         let mut status = Status::Converged;
         let mut sq = 0.0;
@@ -475,11 +486,12 @@ impl Walks {
             // measured again against each refit and the corrections add up.
             let mut offset = 0.0;
             for _ in 0..OFFSET_ROUNDS {
-                let Some(more) = polarity_offset(&fit.0, a, b, offset, &mut self.distances) else {
+                let Some(more) = polarity_offset(&fit.curve, a, b, offset, &mut self.distances)
+                else {
                     break;
                 };
                 offset += more;
-                let curve = fit.0;
+                let curve = fit.curve;
                 self.points.clear();
                 self.points.extend(
                     a.iter()
@@ -488,7 +500,7 @@ impl Walks {
                 );
                 fit = robust_curve_fit(&mut self.points, &mut self.distances)?;
             }
-            if let (Some(sigma), Curve::Conic(q)) = (sigma, &fit.0) {
+            if let (Some(sigma), Curve::Conic(q)) = (sigma, &fit.curve) {
                 let half_var = 0.5 * (sigma * sigma + 1.0 / 12.0);
                 for p in self.points.iter_mut() {
                     let [gx, gy] = q.gradient(p[0], p[1]);
@@ -498,24 +510,42 @@ impl Walks {
                         p[1] += k * half_var * gy / g;
                     }
                 }
-                let refit = fit_edge_curve(&self.points, None)?;
-                fit = (refit.curve, refit.rms);
+                fit = fit_edge_curve(&self.points, None)?;
             }
-            sq += fit.1 * fit.1;
+            sq += fit.rms * fit.rms;
             samples += self.points.len();
             lines[e] = fit_line_tls(&self.points, None);
-            curves[e] = Some(fit.0);
+            stats[e] = PositionStats::new(self.points.iter(), &fit.curve, fit.model);
+            curves[e] = Some(fit.curve);
         }
         let (c0, c1) = (curves[0].as_ref()?, curves[1].as_ref()?);
-        let point = match nearest_intersection(c0, c1, near) {
-            Some(p) => p,
+        let (point, sigma) = match nearest_intersection(c0, c1, near) {
+            Some(p) => {
+                let sigma = match &stats {
+                    [Some(s0), Some(s1)] => corner_covariance(
+                        c0,
+                        s0.variance_at(p),
+                        c1,
+                        s1.variance_at(p),
+                        p,
+                        SAMPLE_BIAS_SIGMA_PX,
+                    )
+                    .map(|c| c.sigma),
+                    _ => None,
+                };
+                (p, sigma)
+            }
             None => {
                 status = Status::Fallback;
-                intersect_lines(lines[0].as_ref()?, lines[1].as_ref()?)?
+                (
+                    intersect_lines(lines[0].as_ref()?, lines[1].as_ref()?)?,
+                    None,
+                )
             }
         };
         Some(Solution {
             point,
+            sigma,
             status,
             residual: (sq / 2.0).sqrt(),
             samples,
@@ -575,8 +605,8 @@ fn move_across(curve: &Curve, p: [f64; 2], d: f64) -> [f64; 2] {
 
 /// Fits an edge curve to `points`, drops samples farther than 3.5 robust standard deviations (and
 /// at least 0.05 px) from it, and refits. Returns the curve and the RMS distance of the kept
-/// samples. `distances` is scratch space.
-fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Option<(Curve, f64)> {
+/// samples (`points` keeps only them). `distances` is scratch space.
+fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Option<CurveFit> {
     let first = fit_edge_curve(points, None)?;
     distances.clear();
     distances.extend(
@@ -590,10 +620,9 @@ fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Opt
     let before = points.len();
     points.retain(|p| first.curve.distance(p[0], p[1]).abs() <= limit);
     if points.len() == before {
-        return Some((first.curve, first.rms));
+        return Some(first);
     }
-    let second = fit_edge_curve(points, None)?;
-    Some((second.curve, second.rms))
+    fit_edge_curve(points, None)
 }
 
 /// Walks one ray from `corner` along `dir`, appending accepted samples to `out` (cleared first).

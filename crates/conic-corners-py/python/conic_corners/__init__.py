@@ -25,7 +25,7 @@ straight lines instead of curves), :data:`CONVERGED` (2).
 
 Path codes (``Board.paths``): :data:`PATH_LOCAL` (0, placed by the single-corner refiner),
 :data:`PATH_BOARD` (1, the intersection of the row and column curves fitted along the whole board,
-with ``Board.sigmas`` its standard deviation) and :data:`PATH_GRADIENT` (2, the
+with a standard deviation in ``Board.sigmas`` like every placed corner) and :data:`PATH_GRADIENT` (2, the
 gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort); :func:`detect`
 fits board-wide by default and falls back to the local refiner per corner where a grid line has too
 few samples, and to the gradient estimate where the local refiner fails or the board-wide answer is
@@ -88,7 +88,8 @@ class Board:
             of its board-wide row and column curves, :data:`PATH_LOCAL` where the single-corner
             refiner placed it, :data:`PATH_GRADIENT` where the gradient estimate did.
         sigmas: N ``float64`` standard deviations (px) of the position in its worst direction,
-            from the board-wide fit's residuals; NaN unless ``paths`` is :data:`PATH_BOARD`.
+            propagated from the residuals of the fits that placed it (board-wide or local curves,
+            or the gradient estimate, whose sigma is conservative); NaN where refinement failed.
 
     A board may have holes (occluded corners), so ``len(board)`` can be less than ``rows * cols``.
     """
@@ -162,8 +163,8 @@ def detect(
         stride: scanlines between consecutive edge samples, 1..=64 (default 2 here, as in the
             CLI's ``detect``; 1 gains the last thousandths of a pixel at ~1.6× the time).
         refine: how corners are placed (the CLI's ``--refine``): ``"board"`` (default) fits the
-            row and column curves along the whole board and intersects them, more accurate and
-            with a per-corner ``sigma``; ``"local"`` refines each corner on its own, as
+            row and column curves along the whole board and intersects them, the more accurate;
+            ``"local"`` refines each corner on its own, as
             :func:`refine` does.
         bgr: colour images are in OpenCV's B, G, R order.
 

@@ -43,7 +43,7 @@ class Board:
     paths: npt.NDArray[np.uint8]
     """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT)."""
     sigmas: npt.NDArray[np.float64]
-    """N standard deviations (px, worst direction) of board-fitted positions, NaN elsewhere."""
+    """N standard deviations (px, worst direction) of the positions, NaN where refinement failed."""
     def __init__(
         self,
         rows: int,
