@@ -1375,13 +1375,27 @@ impl PositionStats {
             return None;
         }
         let mut gram = Matrix5::zeros();
-        let mut rss = 0.0;
+        let (mut rss, mut lag, mut prev) = (0.0, 0.0, None);
         for p in points {
             let u = ((p[0] - mx) * t[0] + (p[1] - my) * t[1]) / scale;
             let phi = basis(u, degree);
             gram += phi * phi.transpose();
-            rss += curve.distance(p[0], p[1]).powi(2);
+            let r = curve.distance(p[0], p[1]);
+            rss += r * r;
+            if let Some(q) = prev {
+                lag += r * q;
+            }
+            prev = Some(r);
         }
+        // Neighbouring samples share pixel-phase and blur errors, so their residuals correlate;
+        // with lag-one correlation ρ > 0 the fit has fewer independent samples than it counts,
+        // and the variance of a fitted position grows by about (1 + ρ) / (1 − ρ) (AR(1)).
+        let rho = if rss > 0.0 {
+            (lag / rss).clamp(0.0, 0.9)
+        } else {
+            0.0
+        };
+        let rss = rss * (1.0 + rho) / (1.0 - rho);
         for k in degree + 1..5 {
             gram[(k, k)] = 1.0;
         }

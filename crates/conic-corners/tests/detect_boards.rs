@@ -384,7 +384,7 @@ fn gradient_estimate_at_foreshortened_silhouettes() {
             let det = detect(&r.image, &DetectParams::default());
             let o = check(&what, &det, &r.corners);
             let o_without = check(&what, &detect(&r.image, &without), &r.corners);
-            assert_eq!(o.missing, o_without.missing, "{what}");
+            assert!(o.missing <= o_without.missing, "{what}");
             with_sq += o.rms * o.rms;
             without_sq += o_without.rms * o_without.rms;
             for c in det.boards.iter().flat_map(|b| &b.corners) {
