@@ -360,7 +360,7 @@ fn completion_restores_corners_the_election_rejects() {
 /// doubtful (short, extrapolated curves), and those corners take the gradient estimate. On a
 /// fixed family of scenes, every gradient corner is within 0.5 px of the truth and the total
 /// squared error is below that of the pipeline without the gradient estimate (0.0071 against
-X. Per corner it is no sure
+/// 0.0085 px² summed over the scenes' RMS² when this was written). Per corner it is no sure
 /// gain: the gradient estimate is 0.07–0.45 px off at such corners, the answers it replaces
 /// 0.004–0.23 px.
 #[test]
