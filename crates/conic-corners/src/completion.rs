@@ -38,7 +38,9 @@
 //!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
 //!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one`] (reach one
 //!    step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an occluder cut
-//!    the edges) to a corner that is not [`Status::Failed`], within `max_offset` steps of `p̂`.
+//!    the edges) to a corner that is not [`Status::Failed`], or failing that by the gradient
+//!    estimate ([`crate::gradient`]: blurred or foreshortened junctions, as in the outer ring of
+//!    a bent board, leave the edge walks nothing to fit), within `max_offset` steps of `p̂`.
 //! 4. **Acceptance.** A verified corner more than half a step from every corner of every board is
 //!    appended to `corners` (angles from `u` and `v`, score the correlation of (b)) and joins the
 //!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
@@ -53,6 +55,7 @@
 
 use crate::connectivity::Board;
 use crate::election::Corner;
+use crate::gradient::{refine_gradient, GradientParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::GrayImage;
 use std::collections::HashMap;
@@ -74,6 +77,9 @@ pub struct CompletionParams {
     pub max_offset: f64,
     /// Refiner settings for the check (c); `reach` and `max_shift` are set from the step.
     pub refine: RefineParams,
+    /// The last resort of the check (c) where the refiner fails at every reach (`None`: none);
+    /// its `max_shift` is set from the step.
+    pub gradient: Option<GradientParams>,
 }
 
 impl Default for CompletionParams {
@@ -88,6 +94,7 @@ impl Default for CompletionParams {
                 stride: 2,
                 ..RefineParams::default()
             },
+            gradient: Some(GradientParams::default()),
         }
     }
 }
@@ -526,7 +533,7 @@ fn complete_one(
                 // (c) The refiner must place the corner near the prediction. Long walks fail
                 // where scribbles or an occluder cut the edges, so shorter reaches are tried
                 // before giving up (a search position alone is only good to a few pixels).
-                let Some(z) = [1.0, 0.5, 0.3, 0.15].into_iter().find_map(|k| {
+                let refined = [1.0, 0.5, 0.3, 0.15].into_iter().find_map(|k| {
                     let refine = RefineParams {
                         reach: (k * step).clamp(5.0, params.refine.reach.max(5.0)),
                         max_shift: params.max_offset * step,
@@ -534,7 +541,17 @@ fn complete_one(
                     };
                     let r = refine_one(image, q, &refine);
                     (r.status != Status::Failed).then_some([r.x, r.y])
-                }) else {
+                });
+                // Blurred or foreshortened junctions (the outer ring of a bent board) leave the
+                // edge walks nothing to fit; the gradient estimate needs only the junction.
+                let last_resort = || {
+                    let g = GradientParams {
+                        max_shift: params.max_offset * step,
+                        ..params.gradient.clone()?
+                    };
+                    refine_gradient(image, q, &g).map(|c| c.point)
+                };
+                let Some(z) = refined.or_else(last_resort) else {
                     continue;
                 };
                 if norm(sub(z, p)) > params.max_offset * step {
