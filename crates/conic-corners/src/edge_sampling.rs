@@ -206,7 +206,11 @@ fn fit_sigmoid_generic<const L: usize, const FUSED: bool>(
         let mut out = [0f32; L];
         for l in 0..L {
             // The padding stays zero.
-            let t = if k * L + l < n { chunk[l] - reference } else { 0.0 };
+            let t = if k * L + l < n {
+                chunk[l] - reference
+            } else {
+                0.0
+            };
             out[l] = t;
             sum[l] += t;
             sum_sq[l] += t * t;
@@ -274,6 +278,7 @@ fn pairwise_sum<const L: usize>(mut v: [f32; L]) -> f64 {
 
 /// Start values `(p, c)` (any intensity scale), or `None` for a profile with no discernible
 /// slope.
+#[inline(always)]
 fn start_values(y: &[f32]) -> Option<(f64, f64)> {
     let n = y.len();
     if n < 4 {
@@ -430,7 +435,7 @@ fn basis_sums<const K: usize, const L: usize, const FUSED: bool>(
     }
     // u_i = (i − q)/c − (p − q)/c with q an integer next to p: the f32 rounding of u is then
     // relative to u itself, not to i/c, and does not quantize the position.
-    let q = p.clamp(-1e6, 1e6).trunc();
+    let q = clamp(p, -1e6, 1e6).trunc();
     let ic = w.inv_c as f32;
     let pc = ((p - q) * w.inv_c) as f32;
     let qf = q as f32;
@@ -583,8 +588,8 @@ fn variable_projection<const K: usize, const L: usize, const FUSED: bool>(
         // step to a quarter window in p and to a factor 2 either way in c.
         let quarter = n as f64 / 4.0;
         let c = width.c;
-        let dp = cur.step[0].clamp(-quarter, quarter);
-        let dc = cur.step[1].clamp(-0.5 * c, c);
+        let dp = clamp(cur.step[0], -quarter, quarter);
+        let dc = clamp(cur.step[1], -0.5 * c, c);
         if dp.abs() < STEP_TOLERANCE && dc.abs() < STEP_TOLERANCE {
             // Convergence is quadratic on the small residuals of an edge profile: this last step
             // leaves an error far below it, and (a, d, rss) move by O(step) only.
@@ -735,24 +740,26 @@ pub fn sample_edge_with(
     };
     let (fixed, cross) = match axis {
         Axis::X => {
-            let y0 = point[1].round();
+            let y0 = round(point[1]);
             (y0, point[0] + tx / ty * (y0 - point[1]))
         }
         Axis::Y => {
-            let x0 = point[0].round();
+            let x0 = round(point[0]);
             (x0, point[1] + ty / tx * (x0 - point[0]))
         }
     };
-    let first = scanline_fit(image, axis, fixed, cross.round(), half_width, |profile| {
+    let centre = round(cross);
+    let first = scanline_fit(image, axis, fixed, centre, half_width, |profile| {
         fit_sigmoid_with(profile, fixed_width, params)
     })?;
     // The logistic is not the exact profile, so a window off-centre from the edge biases the
     // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window.
     let found = first.0 + first.1.position;
-    let (start, fit) = if found.round() != cross.round() {
-        scanline_fit(image, axis, fixed, found.round(), half_width, |profile| {
+    let found_centre = round(found);
+    let (start, fit) = if found_centre != centre {
+        scanline_fit(image, axis, fixed, found_centre, half_width, |profile| {
             // The same edge, in the shifted window's coordinates.
-            let p = found - (found.round() - half_width as f64);
+            let p = found - (found_centre - half_width as f64);
             fit_sigmoid_from(profile, fixed_width, params, Some((p, first.1.width)))
         })?
     } else {
@@ -764,6 +771,33 @@ pub fn sample_edge_with(
         Axis::Y => [fixed, along],
     };
     Some(EdgeSample { point, axis, fit })
+}
+
+/// `x.clamp(lo, hi)` (NaN stays NaN) for `lo ≤ hi`, without the standard one's check of the
+/// bounds, which keeps it from being inlined into the AVX2 build of the fit.
+#[inline(always)]
+fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
+/// `x.round()` (halves away from zero) without the library call that baseline x86-64, lacking a
+/// rounding instruction, makes for it: the integer part by conversion, exact below 2⁵².
+#[inline]
+pub(crate) fn round(x: f64) -> f64 {
+    let a = x.abs();
+    if a.is_nan() || a >= 4_503_599_627_370_496.0 {
+        // Integral already, or not a number.
+        return x;
+    }
+    let t = a as i64 as f64;
+    let r = if a - t >= 0.5 { t + 1.0 } else { t };
+    r.copysign(x)
 }
 
 /// Fits the `2h + 1` pixels of the row (`Axis::X`, `y = fixed`) or column (`Axis::Y`, `x = fixed`)
@@ -1282,6 +1316,35 @@ mod tests {
                     "{a:?} {b:?}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn round_matches_std() {
+        for x in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -2.5,
+            0.499_999_999_999_999_94,
+            -0.499_999_999_999_999_94,
+            1e15 + 0.5,
+            4_503_599_627_370_495.5,
+            4_503_599_627_370_497.0,
+            1e300,
+            -7.49,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ] {
+            assert_eq!(round(x).to_bits(), x.round().to_bits(), "{x}");
+        }
+        assert!(round(f64::NAN).is_nan());
+        for k in -2000..2000 {
+            let x = k as f64 * 0.137;
+            assert_eq!(round(x), x.round(), "{x}");
         }
     }
 

@@ -24,8 +24,8 @@
 //! centre of the top-left pixel.
 
 use crate::edge_sampling::{
-    blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, EdgeSample, SigmoidParams,
-    LOGISTIC_TO_GAUSSIAN,
+    blur_sigma_from_widths, next_scanline_point, round, sample_edge_with, Axis, EdgeSample,
+    SigmoidParams, LOGISTIC_TO_GAUSSIAN,
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
@@ -241,7 +241,7 @@ fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 
         let mut acc = 0.0;
         for dr in [-1.5, -0.5, 0.5, 1.5] {
             let rr = r + dr;
-            acc += image.bilinear((p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
+            acc += bilinear(image, (p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
         }
         *v = acc;
         (c, s) = (c * rot_c - s * rot_s, s * rot_c + c * rot_s);
@@ -276,6 +276,26 @@ fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 
         }
     }
     (n == 4).then_some(out)
+}
+
+/// [`GrayImage::bilinear`] with the same arithmetic, minus the library call for `floor` that
+/// baseline x86-64 makes: inside the image the coordinates are positive, where truncation is the
+/// floor. A ring profile takes 720 samples.
+#[inline]
+fn bilinear(image: &GrayImage, x: f32, y: f32) -> Option<f32> {
+    let (w, h) = (image.width(), image.height());
+    if !(x >= 0.0 && y >= 0.0 && x < (w as f32 - 1.0) && y < (h as f32 - 1.0)) {
+        // Outside, or on the last row or column: the general rules.
+        return image.bilinear(x, y);
+    }
+    let (x0, y0) = (x as usize, y as usize);
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let (upper, lower) = (image.row(y0), image.row(y0 + 1));
+    let (a, b) = (upper[x0], upper[x0 + 1]);
+    let (c, d) = (lower[x0], lower[x0 + 1]);
+    let top = a + (b - a) * fx;
+    let bottom = c + (d - c) * fx;
+    Some(top + (bottom - top) * fy)
 }
 
 /// How one pass walks its rays.
@@ -426,7 +446,7 @@ impl Walks {
         for (k, ray) in self.rays.iter().enumerate() {
             let (a, b) = (ray.first()?.point, ray.last()?.point);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let n = dx.hypot(dy);
+            let n = (dx * dx + dy * dy).sqrt();
             if n < 2.0 {
                 return None;
             }
@@ -492,7 +512,7 @@ impl Walks {
                 let half_var = 0.5 * (sigma * sigma + 1.0 / 12.0);
                 for p in self.points.iter_mut() {
                     let [gx, gy] = q.gradient(p[0], p[1]);
-                    let (k, g) = (q.curvature(p[0], p[1]), gx.hypot(gy));
+                    let (k, g) = (q.curvature(p[0], p[1]), (gx * gx + gy * gy).sqrt());
                     if k.is_finite() && g > 0.0 {
                         p[0] += k * half_var * gx / g;
                         p[1] += k * half_var * gy / g;
@@ -565,7 +585,8 @@ fn move_across(curve: &Curve, p: [f64; 2], d: f64) -> [f64; 2] {
         Curve::Line(l) => l.normal(),
         Curve::Conic(q) => q.gradient(p[0], p[1]),
     };
-    let len = n[0].hypot(n[1]);
+    // Pixel-scale gradients: no overflow for hypot's slower scaling to guard against.
+    let len = (n[0] * n[0] + n[1] * n[1]).sqrt();
     if len > 0.0 && len.is_finite() {
         [p[0] + d * n[0] / len, p[1] + d * n[1] / len]
     } else {
@@ -617,6 +638,7 @@ fn walk_ray(
     out.clear();
     let mut d = dir;
     let mut anchor = [corner[0] + cfg.start * d[0], corner[1] + cfg.start * d[1]];
+    let mut recent = Moments::new(corner);
     let mut first_scan = true;
     let mut misses = 0;
     let mut polarity = 0.0f64;
@@ -645,11 +667,11 @@ fn walk_ray(
         // Where the other edge (a straight line through the corner) crosses this scanline.
         let hw = cfg.half_width(d);
         let clash = if steep {
-            let y0 = q[1].round();
+            let y0 = round(q[1]);
             (other[1].abs() > 1e-9)
                 .then(|| (corner[0] + (y0 - corner[1]) * other[0] / other[1] - q[0]).abs())
         } else {
-            let x0 = q[0].round();
+            let x0 = round(q[0]);
             (other[0].abs() > 1e-9)
                 .then(|| (corner[1] + (x0 - corner[0]) * other[1] / other[0] - q[1]).abs())
         };
@@ -694,15 +716,19 @@ fn walk_ray(
         }
         out.push(s);
         // Predict from a line through the recent samples rather than from the last one, so that
-        // one noisy sample neither bends the walk nor shifts the next window.
-        let recent = &out[out.len().saturating_sub(PREDICT_SAMPLES)..];
+        // one noisy sample neither bends the walk nor shifts the next window. Their moments
+        // slide with the walk (one sample in, one out) instead of being summed again.
+        recent.add(s.point, 1.0);
+        if out.len() > PREDICT_SAMPLES {
+            recent.add(out[out.len() - 1 - PREDICT_SAMPLES].point, -1.0);
+        }
         anchor = s.point;
-        if let Some((line_dir, on_line, spread)) = local_line(recent, d) {
-            if recent.len() >= 6 {
+        if let Some((line_dir, on_line, spread)) = recent.line(s.point, d) {
+            if recent.n >= 6.0 {
                 d = line_dir;
                 anchor = on_line;
                 // The line absorbs two degrees of freedom of the scatter.
-                let n = recent.len() as f64;
+                let n = recent.n;
                 tolerance =
                     (4.0 * spread * (n / (n - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
             }
@@ -733,40 +759,148 @@ const OFFSET_ROUNDS: usize = 4;
 /// Least-squares line through the sample points: its unit direction (oriented like `d`), the
 /// projection of the last sample onto it, and the RMS distance of the samples to it.
 fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2], f64)> {
-    let n = samples.len() as f64;
-    if samples.len() < 2 {
-        return None;
-    }
-    let (mut mx, mut my) = (0.0, 0.0);
+    let mut m = Moments::new(samples.first()?.point);
     for s in samples {
-        mx += s.point[0];
-        my += s.point[1];
+        m.add(s.point, 1.0);
     }
-    let (mx, my) = (mx / n, my / n);
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for s in samples {
-        let (dx, dy) = (s.point[0] - mx, s.point[1] - my);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
+    m.line(samples.last()?.point, d)
+}
+
+/// Sums of the coordinates of a set of points and of their products, relative to `origin` (a
+/// point near them, so that the centred moments do not cancel): a set that points can join and
+/// leave in O(1).
+struct Moments {
+    origin: [f64; 2],
+    n: f64,
+    sx: f64,
+    sy: f64,
+    sxx: f64,
+    sxy: f64,
+    syy: f64,
+}
+
+impl Moments {
+    fn new(origin: [f64; 2]) -> Self {
+        Self {
+            origin,
+            n: 0.0,
+            sx: 0.0,
+            sy: 0.0,
+            sxx: 0.0,
+            sxy: 0.0,
+            syy: 0.0,
+        }
     }
-    // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy): from
-    // (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
-    let r = (4.0 * sxy * sxy + (sxx - syy) * (sxx - syy)).sqrt();
-    let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
-    let (cos, sin) = (
-        (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
-        (0.5 * (1.0 - cos2)).max(0.0).sqrt(),
-    );
-    let mut u = [cos, if sxy < 0.0 { -sin } else { sin }];
-    if u[0] * d[0] + u[1] * d[1] < 0.0 {
-        u = [-u[0], -u[1]];
+
+    /// Adds point `p` with weight `w` (−1 removes a point added before).
+    fn add(&mut self, p: [f64; 2], w: f64) {
+        let (x, y) = (p[0] - self.origin[0], p[1] - self.origin[1]);
+        self.n += w;
+        self.sx += w * x;
+        self.sy += w * y;
+        self.sxx += w * x * x;
+        self.sxy += w * x * y;
+        self.syy += w * y * y;
     }
-    let last = samples.last()?.point;
-    let t = (last[0] - mx) * u[0] + (last[1] - my) * u[1];
-    let across = (sxx * u[1] * u[1] - 2.0 * sxy * u[0] * u[1] + syy * u[0] * u[0]).max(0.0);
-    Some((u, [mx + t * u[0], my + t * u[1]], (across / n).sqrt()))
+
+    /// The least-squares line through the points: its unit direction (oriented like `d`), the
+    /// projection of `last` onto it, and the RMS distance of the points to it. `None` for fewer
+    /// than two points.
+    fn line(&self, last: [f64; 2], d: [f64; 2]) -> Option<([f64; 2], [f64; 2], f64)> {
+        let n = self.n;
+        if n < 2.0 {
+            return None;
+        }
+        let (mx, my) = (self.sx / n, self.sy / n);
+        let sxx = (self.sxx - n * mx * mx).max(0.0);
+        let syy = (self.syy - n * my * my).max(0.0);
+        let sxy = self.sxy - n * mx * my;
+        // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy):
+        // from (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
+        let r = (4.0 * sxy * sxy + (sxx - syy) * (sxx - syy)).sqrt();
+        let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
+        let (cos, sin) = (
+            (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
+            (0.5 * (1.0 - cos2)).max(0.0).sqrt(),
+        );
+        let mut u = [cos, if sxy < 0.0 { -sin } else { sin }];
+        if u[0] * d[0] + u[1] * d[1] < 0.0 {
+            u = [-u[0], -u[1]];
+        }
+        let (lx, ly) = (last[0] - self.origin[0], last[1] - self.origin[1]);
+        let t = (lx - mx) * u[0] + (ly - my) * u[1];
+        let across = (sxx * u[1] * u[1] - 2.0 * sxy * u[0] * u[1] + syy * u[0] * u[0]).max(0.0);
+        Some((
+            u,
+            [
+                self.origin[0] + mx + t * u[0],
+                self.origin[1] + my + t * u[1],
+            ],
+            (across / n).sqrt(),
+        ))
+    }
 }
 
 /// Consecutive missed scanlines that end a walk.
 const MAX_MISSES: usize = 6;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ring_bilinear_matches_the_image() {
+        let (w, h) = (13, 9);
+        let data: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 101) as f32 * 0.7).collect();
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        for k in 0..4000 {
+            let (x, y) = (k as f32 * 0.0131 - 2.0, (k % 97) as f32 * 0.113 - 1.0);
+            assert_eq!(bilinear(&img, x, y), img.bilinear(x, y), "{x} {y}");
+        }
+        for (x, y) in [
+            (12.0, 3.0),
+            (3.0, 8.0),
+            (12.0, 8.0),
+            (f32::NAN, 1.0),
+            (1e30, 1.0),
+        ] {
+            assert_eq!(bilinear(&img, x, y), img.bilinear(x, y), "{x} {y}");
+        }
+    }
+
+    #[test]
+    fn sliding_moments_match_a_direct_line_fit() {
+        // Points along a slightly noisy line far from the origin; the sliding window (one in,
+        // one out) must agree with moments summed afresh.
+        let pts: Vec<[f64; 2]> = (0..200)
+            .map(|i| {
+                let t = i as f64 * 0.7;
+                let wobble = ((i * 7919) % 11) as f64 * 0.01;
+                [400.0 + 0.3 * t - wobble * 0.9, 300.0 + t + wobble * 0.3]
+            })
+            .collect();
+        let mut sliding = Moments::new(pts[0]);
+        for (i, &p) in pts.iter().enumerate() {
+            sliding.add(p, 1.0);
+            if i >= PREDICT_SAMPLES {
+                sliding.add(pts[i - PREDICT_SAMPLES], -1.0);
+            }
+            let window = &pts[(i + 1).saturating_sub(PREDICT_SAMPLES)..=i];
+            let mut fresh = Moments::new(window[0]);
+            for &q in window {
+                fresh.add(q, 1.0);
+            }
+            let (a, b) = (sliding.line(p, [0.3, 1.0]), fresh.line(p, [0.3, 1.0]));
+            match (a, b) {
+                (None, None) => assert!(i == 0),
+                (Some((ua, pa, sa)), Some((ub, pb, sb))) => {
+                    assert!((ua[0] - ub[0]).abs() < 1e-9 && (ua[1] - ub[1]).abs() < 1e-9);
+                    assert!((pa[0] - pb[0]).abs() < 1e-9 && (pa[1] - pb[1]).abs() < 1e-9);
+                    assert!((sa - sb).abs() < 1e-9, "{sa} {sb}");
+                    assert!(ua[1] > 0.0, "oriented like d");
+                }
+                _ => panic!("{i}"),
+            }
+        }
+    }
+}
