@@ -24,8 +24,8 @@
 //! centre of the top-left pixel.
 
 use crate::edge_sampling::{
-    blur_sigma_from_widths, next_scanline_point, round, sample_edge_with, Axis, EdgeSample,
-    SigmoidParams, LOGISTIC_TO_GAUSSIAN,
+    blur_sigma_from_widths, next_scanline_point, round, sample_edge_predicted, sample_edge_with,
+    Axis, EdgeSample, SigmoidParams, LOGISTIC_TO_GAUSSIAN,
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
@@ -309,6 +309,9 @@ struct WalkConfig {
     /// fixed, which halves their variance under heavy noise at no bias when it is right.
     normal_width: Option<f64>,
     sigmoid: SigmoidParams,
+    /// Whether the sigmoid fits start at the predicted crossing once the walk predicts from a
+    /// line ([`sample_edge_predicted`]); only when the fixed width is the measured one.
+    predicted_start: bool,
 }
 
 impl WalkConfig {
@@ -326,6 +329,7 @@ impl WalkConfig {
                 min_contrast_to_noise: 2.5,
                 ..SigmoidParams::default()
             },
+            predicted_start: false,
         }
     }
 
@@ -338,6 +342,7 @@ impl WalkConfig {
                 min_contrast_to_noise: 2.0,
                 ..SigmoidParams::default()
             },
+            predicted_start: true,
             ..Self::pilot(sigma, reach, stride)
         }
     }
@@ -645,6 +650,8 @@ fn walk_ray(
     let mut contrast_ref = 0.0f64;
     let mut reached = false;
     let mut tolerance = 1.0 + 0.5 * cfg.sigma;
+    // Whether the recent samples scatter little about their line (4 RMS under a pixel).
+    let mut clean = false;
     let guard = 2.5 * cfg.sigma + 1.0;
     loop {
         // Scanline geometry follows the current direction.
@@ -682,7 +689,7 @@ fn walk_ray(
             let along = if steep { d[1] } else { d[0] };
             (c / along.abs().max(0.5)) as f32
         });
-        let accepted = sample_edge_with(image, q, d, hw, fixed, &cfg.sigmoid).filter(|s| {
+        let acceptable = |s: &EdgeSample| {
             // Signed contrast across the ray's left normal (−d.y, d.x), whatever the scan axis.
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();
@@ -697,6 +704,19 @@ fn walk_ray(
             let similar =
                 out.len() < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
             near && same && similar
+        };
+        // Once the walk predicts from a line through clean samples, the prediction is a better
+        // start for the fit than the profile's own steepest crossing; where that fit fails or is
+        // not acceptable, the profile's own start has the last word, so no sample is lost.
+        // Under heavy noise a profile's least squares has several minima, and the prediction
+        // could pick another one than the steepest crossing does: the walk then keeps to the
+        // latter.
+        let predicted = (cfg.predicted_start && clean && out.len() >= PREDICTED_START)
+            .then(|| sample_edge_predicted(image, q, d, hw, fixed, &cfg.sigmoid))
+            .flatten()
+            .filter(|s| acceptable(s));
+        let accepted = predicted.or_else(|| {
+            sample_edge_with(image, q, d, hw, fixed, &cfg.sigmoid).filter(|s| acceptable(s))
         });
         let Some(s) = accepted else {
             misses += 1;
@@ -729,8 +749,9 @@ fn walk_ray(
                 anchor = on_line;
                 // The line absorbs two degrees of freedom of the scatter.
                 let n = recent.n;
-                tolerance =
-                    (4.0 * spread * (n / (n - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+                let scatter = 4.0 * spread * (n / (n - 2.0)).sqrt();
+                tolerance = scatter.clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+                clean = scatter < 1.0;
             }
         }
     }
@@ -743,6 +764,10 @@ fn walk_ray(
 
 /// Samples behind the prediction of the next one.
 const PREDICT_SAMPLES: usize = 24;
+
+/// Samples a walk has before its sigmoid fits start at the predicted crossing
+/// ([`sample_edge_predicted`]): from then on the prediction follows a line through them.
+const PREDICTED_START: usize = 6;
 
 /// Samples of each ray, nearest the corner first, that measure the offset between an edge's two
 /// rays ([`polarity_offset`]).
