@@ -643,7 +643,6 @@ fn walk_ray(
     out.clear();
     let mut d = dir;
     let mut anchor = [corner[0] + cfg.start * d[0], corner[1] + cfg.start * d[1]];
-    let mut recent = Moments::new(corner);
     let mut first_scan = true;
     let mut misses = 0;
     let mut polarity = 0.0f64;
@@ -736,19 +735,15 @@ fn walk_ray(
         }
         out.push(s);
         // Predict from a line through the recent samples rather than from the last one, so that
-        // one noisy sample neither bends the walk nor shifts the next window. Their moments
-        // slide with the walk (one sample in, one out) instead of being summed again.
-        recent.add(s.point, 1.0);
-        if out.len() > PREDICT_SAMPLES {
-            recent.add(out[out.len() - 1 - PREDICT_SAMPLES].point, -1.0);
-        }
+        // one noisy sample neither bends the walk nor shifts the next window.
+        let recent = &out[out.len().saturating_sub(PREDICT_SAMPLES)..];
         anchor = s.point;
-        if let Some((line_dir, on_line, spread)) = recent.line(s.point, d) {
-            if recent.n >= 6.0 {
+        if let Some((line_dir, on_line, spread)) = local_line(recent, d) {
+            if recent.len() >= 6 {
                 d = line_dir;
                 anchor = on_line;
                 // The line absorbs two degrees of freedom of the scatter.
-                let n = recent.n;
+                let n = recent.len() as f64;
                 let scatter = 4.0 * spread * (n / (n - 2.0)).sqrt();
                 tolerance = scatter.clamp(1.0, 1.0 + 0.5 * cfg.sigma);
                 clean = scatter < 1.0;
@@ -784,86 +779,39 @@ const OFFSET_ROUNDS: usize = 4;
 /// Least-squares line through the sample points: its unit direction (oriented like `d`), the
 /// projection of the last sample onto it, and the RMS distance of the samples to it.
 fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2], f64)> {
-    let mut m = Moments::new(samples.first()?.point);
+    let n = samples.len() as f64;
+    if samples.len() < 2 {
+        return None;
+    }
+    let (mut mx, mut my) = (0.0, 0.0);
     for s in samples {
-        m.add(s.point, 1.0);
+        mx += s.point[0];
+        my += s.point[1];
     }
-    m.line(samples.last()?.point, d)
-}
-
-/// Sums of the coordinates of a set of points and of their products, relative to `origin` (a
-/// point near them, so that the centred moments do not cancel): a set that points can join and
-/// leave in O(1).
-struct Moments {
-    origin: [f64; 2],
-    n: f64,
-    sx: f64,
-    sy: f64,
-    sxx: f64,
-    sxy: f64,
-    syy: f64,
-}
-
-impl Moments {
-    fn new(origin: [f64; 2]) -> Self {
-        Self {
-            origin,
-            n: 0.0,
-            sx: 0.0,
-            sy: 0.0,
-            sxx: 0.0,
-            sxy: 0.0,
-            syy: 0.0,
-        }
+    let (mx, my) = (mx / n, my / n);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for s in samples {
+        let (dx, dy) = (s.point[0] - mx, s.point[1] - my);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
     }
-
-    /// Adds point `p` with weight `w` (−1 removes a point added before).
-    fn add(&mut self, p: [f64; 2], w: f64) {
-        let (x, y) = (p[0] - self.origin[0], p[1] - self.origin[1]);
-        self.n += w;
-        self.sx += w * x;
-        self.sy += w * y;
-        self.sxx += w * x * x;
-        self.sxy += w * x * y;
-        self.syy += w * y * y;
+    // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy): from
+    // (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
+    let r = (4.0 * sxy * sxy + (sxx - syy) * (sxx - syy)).sqrt();
+    let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
+    let (cos, sin) = (
+        (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
+        (0.5 * (1.0 - cos2)).max(0.0).sqrt(),
+    );
+    let mut u = [cos, if sxy < 0.0 { -sin } else { sin }];
+    if u[0] * d[0] + u[1] * d[1] < 0.0 {
+        u = [-u[0], -u[1]];
     }
-
-    /// The least-squares line through the points: its unit direction (oriented like `d`), the
-    /// projection of `last` onto it, and the RMS distance of the points to it. `None` for fewer
-    /// than two points.
-    fn line(&self, last: [f64; 2], d: [f64; 2]) -> Option<([f64; 2], [f64; 2], f64)> {
-        let n = self.n;
-        if n < 2.0 {
-            return None;
-        }
-        let (mx, my) = (self.sx / n, self.sy / n);
-        let sxx = (self.sxx - n * mx * mx).max(0.0);
-        let syy = (self.syy - n * my * my).max(0.0);
-        let sxy = self.sxy - n * mx * my;
-        // Principal axis of the scatter matrix, at angle θ with tan 2θ = 2 sxy / (sxx − syy):
-        // from (cos 2θ, sin 2θ) by the half-angle formulas, without trigonometric calls.
-        let r = (4.0 * sxy * sxy + (sxx - syy) * (sxx - syy)).sqrt();
-        let cos2 = if r > 0.0 { (sxx - syy) / r } else { 1.0 };
-        let (cos, sin) = (
-            (0.5 * (1.0 + cos2)).max(0.0).sqrt(),
-            (0.5 * (1.0 - cos2)).max(0.0).sqrt(),
-        );
-        let mut u = [cos, if sxy < 0.0 { -sin } else { sin }];
-        if u[0] * d[0] + u[1] * d[1] < 0.0 {
-            u = [-u[0], -u[1]];
-        }
-        let (lx, ly) = (last[0] - self.origin[0], last[1] - self.origin[1]);
-        let t = (lx - mx) * u[0] + (ly - my) * u[1];
-        let across = (sxx * u[1] * u[1] - 2.0 * sxy * u[0] * u[1] + syy * u[0] * u[0]).max(0.0);
-        Some((
-            u,
-            [
-                self.origin[0] + mx + t * u[0],
-                self.origin[1] + my + t * u[1],
-            ],
-            (across / n).sqrt(),
-        ))
-    }
+    let last = samples.last()?.point;
+    let t = (last[0] - mx) * u[0] + (last[1] - my) * u[1];
+    let across = (sxx * u[1] * u[1] - 2.0 * sxy * u[0] * u[1] + syy * u[0] * u[0]).max(0.0);
+    Some((u, [mx + t * u[0], my + t * u[1]], (across / n).sqrt()))
 }
 
 /// Consecutive missed scanlines that end a walk.
@@ -890,42 +838,6 @@ mod tests {
             (1e30, 1.0),
         ] {
             assert_eq!(bilinear(&img, x, y), img.bilinear(x, y), "{x} {y}");
-        }
-    }
-
-    #[test]
-    fn sliding_moments_match_a_direct_line_fit() {
-        // Points along a slightly noisy line far from the origin; the sliding window (one in,
-        // one out) must agree with moments summed afresh.
-        let pts: Vec<[f64; 2]> = (0..200)
-            .map(|i| {
-                let t = i as f64 * 0.7;
-                let wobble = ((i * 7919) % 11) as f64 * 0.01;
-                [400.0 + 0.3 * t - wobble * 0.9, 300.0 + t + wobble * 0.3]
-            })
-            .collect();
-        let mut sliding = Moments::new(pts[0]);
-        for (i, &p) in pts.iter().enumerate() {
-            sliding.add(p, 1.0);
-            if i >= PREDICT_SAMPLES {
-                sliding.add(pts[i - PREDICT_SAMPLES], -1.0);
-            }
-            let window = &pts[(i + 1).saturating_sub(PREDICT_SAMPLES)..=i];
-            let mut fresh = Moments::new(window[0]);
-            for &q in window {
-                fresh.add(q, 1.0);
-            }
-            let (a, b) = (sliding.line(p, [0.3, 1.0]), fresh.line(p, [0.3, 1.0]));
-            match (a, b) {
-                (None, None) => assert!(i == 0),
-                (Some((ua, pa, sa)), Some((ub, pb, sb))) => {
-                    assert!((ua[0] - ub[0]).abs() < 1e-9 && (ua[1] - ub[1]).abs() < 1e-9);
-                    assert!((pa[0] - pb[0]).abs() < 1e-9 && (pa[1] - pb[1]).abs() < 1e-9);
-                    assert!((sa - sb).abs() < 1e-9, "{sa} {sb}");
-                    assert!(ua[1] > 0.0, "oriented like d");
-                }
-                _ => panic!("{i}"),
-            }
         }
     }
 }
