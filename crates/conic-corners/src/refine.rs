@@ -387,7 +387,7 @@ impl Walks {
         Self {
             rays: std::array::from_fn(|_| Vec::with_capacity(per_ray)),
             points: Vec::with_capacity(2 * per_ray),
-            distances: Vec::with_capacity(2 * per_ray),
+            distances: Vec::with_capacity(4 * per_ray),
         }
     }
 
@@ -604,18 +604,22 @@ fn move_across(curve: &Curve, p: [f64; 2], d: f64) -> [f64; 2] {
 /// samples. `distances` is scratch space.
 fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Option<(Curve, f64)> {
     let first = fit_edge_curve(points, None)?;
+    // The distances twice: in point order for the cut, and a copy that the median reorders.
+    let n = points.len();
     distances.clear();
     distances.extend(
         points
             .iter()
             .map(|p| first.curve.distance(p[0], p[1]).abs()),
     );
-    let mid = distances.len() / 2;
-    let mad = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
+    distances.extend_from_within(..);
+    let (in_order, copy) = distances.split_at_mut(n);
+    let mad = *copy.select_nth_unstable_by(n / 2, f64::total_cmp).1;
     let limit = (3.5 * 1.4826 * mad).max(0.05);
-    let before = points.len();
-    points.retain(|p| first.curve.distance(p[0], p[1]).abs() <= limit);
-    if points.len() == before {
+    // `retain` visits the points once each, in order.
+    let mut next = in_order.iter();
+    points.retain(|_| next.next().is_some_and(|&d| d <= limit));
+    if points.len() == n {
         return Some((first.curve, first.rms));
     }
     let second = fit_edge_curve(points, None)?;
