@@ -20,6 +20,12 @@
 //! for σ = 1…5 with the edge within half a pixel of the centre of a ±5σ_t window (0.006 px at
 //! σ = 0.7, 0.014 px at σ = 0.5), and grows when the window is off-centre (σ = 2, 25 samples:
 //! 0.008 px at 2 px off, 0.017 px at 4 px off), which is why [`sample_edge`] re-centres.
+//!
+//! **Speed.** Edge walks fit hundreds of profiles per corner, so each pass of the fit computes
+//! the logistic terms in `f32` chunks with a branch-free `exp` (the loop vectorizes), on 8 lanes
+//! with fused multiply-adds where the CPU has AVX2 and FMA (chosen at run time), 4 lanes on
+//! baseline x86-64; the lanes are added and the Gauss–Newton algebra done in `f64`. About
+//! 0.2 µs per 25-sample fit with a fixed width.
 
 use crate::GrayImage;
 
