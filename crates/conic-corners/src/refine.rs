@@ -839,7 +839,7 @@ mod tests {
             (3.0, 8.0),
             (12.0, 8.0),
             (f32::NAN, 1.0),
-            (1e30, 1.0),
+            (13.5, 1.0),
         ] {
             assert_eq!(bilinear(&img, x, y), img.bilinear(x, y), "{x} {y}");
         }
