@@ -24,8 +24,8 @@
 //! centre of the top-left pixel.
 
 use crate::edge_sampling::{
-    blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, EdgeSample, SigmoidParams,
-    LOGISTIC_TO_GAUSSIAN,
+    blur_sigma_from_widths, next_scanline_point, round, sample_edge_predicted, sample_edge_with,
+    Axis, EdgeSample, SigmoidParams, LOGISTIC_TO_GAUSSIAN,
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
@@ -248,7 +248,7 @@ fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 
         let mut acc = 0.0;
         for dr in [-1.5, -0.5, 0.5, 1.5] {
             let rr = r + dr;
-            acc += image.bilinear((p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
+            acc += bilinear(image, (p[0] + rr * c) as f32, (p[1] + rr * s) as f32)?;
         }
         *v = acc;
         (c, s) = (c * rot_c - s * rot_s, s * rot_c + c * rot_s);
@@ -285,6 +285,26 @@ fn ring_directions(image: &GrayImage, p: [f64; 2], r: f64) -> Option<[[f64; 2]; 
     (n == 4).then_some(out)
 }
 
+/// [`GrayImage::bilinear`] with the same arithmetic, minus the library call for `floor` that
+/// baseline x86-64 makes: inside the image the coordinates are positive, where truncation is the
+/// floor. A ring profile takes 720 samples.
+#[inline]
+fn bilinear(image: &GrayImage, x: f32, y: f32) -> Option<f32> {
+    let (w, h) = (image.width(), image.height());
+    if !(x >= 0.0 && y >= 0.0 && x < (w as f32 - 1.0) && y < (h as f32 - 1.0)) {
+        // Outside, or on the last row or column: the general rules.
+        return image.bilinear(x, y);
+    }
+    let (x0, y0) = (x as usize, y as usize);
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let (upper, lower) = (image.row(y0), image.row(y0 + 1));
+    let (a, b) = (upper[x0], upper[x0 + 1]);
+    let (c, d) = (lower[x0], lower[x0 + 1]);
+    let top = a + (b - a) * fx;
+    let bottom = c + (d - c) * fx;
+    Some(top + (bottom - top) * fy)
+}
+
 /// How one pass walks its rays.
 struct WalkConfig {
     sigma: f64,
@@ -296,6 +316,9 @@ struct WalkConfig {
     /// fixed, which halves their variance under heavy noise at no bias when it is right.
     normal_width: Option<f64>,
     sigmoid: SigmoidParams,
+    /// Whether the sigmoid fits start at the predicted crossing once the walk predicts from a
+    /// line ([`sample_edge_predicted`]); only when the fixed width is the measured one.
+    predicted_start: bool,
 }
 
 impl WalkConfig {
@@ -313,6 +336,7 @@ impl WalkConfig {
                 min_contrast_to_noise: 2.5,
                 ..SigmoidParams::default()
             },
+            predicted_start: false,
         }
     }
 
@@ -325,6 +349,7 @@ impl WalkConfig {
                 min_contrast_to_noise: 2.0,
                 ..SigmoidParams::default()
             },
+            predicted_start: true,
             ..Self::pilot(sigma, reach, stride)
         }
     }
@@ -372,7 +397,7 @@ impl Walks {
         Self {
             rays: std::array::from_fn(|_| Vec::with_capacity(per_ray)),
             points: Vec::with_capacity(2 * per_ray),
-            distances: Vec::with_capacity(2 * per_ray),
+            distances: Vec::with_capacity(4 * per_ray),
         }
     }
 
@@ -436,7 +461,7 @@ impl Walks {
         for (k, ray) in self.rays.iter().enumerate() {
             let (a, b) = (ray.first()?.point, ray.last()?.point);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let n = dx.hypot(dy);
+            let n = (dx * dx + dy * dy).sqrt();
             if n < 2.0 {
                 return None;
             }
@@ -504,7 +529,7 @@ impl Walks {
                 let half_var = 0.5 * (sigma * sigma + 1.0 / 12.0);
                 for p in self.points.iter_mut() {
                     let [gx, gy] = q.gradient(p[0], p[1]);
-                    let (k, g) = (q.curvature(p[0], p[1]), gx.hypot(gy));
+                    let (k, g) = (q.curvature(p[0], p[1]), (gx * gx + gy * gy).sqrt());
                     if k.is_finite() && g > 0.0 {
                         p[0] += k * half_var * gx / g;
                         p[1] += k * half_var * gy / g;
@@ -595,7 +620,8 @@ fn move_across(curve: &Curve, p: [f64; 2], d: f64) -> [f64; 2] {
         Curve::Line(l) => l.normal(),
         Curve::Conic(q) => q.gradient(p[0], p[1]),
     };
-    let len = n[0].hypot(n[1]);
+    // Pixel-scale gradients: no overflow for hypot's slower scaling to guard against.
+    let len = (n[0] * n[0] + n[1] * n[1]).sqrt();
     if len > 0.0 && len.is_finite() {
         [p[0] + d * n[0] / len, p[1] + d * n[1] / len]
     } else {
@@ -608,18 +634,22 @@ fn move_across(curve: &Curve, p: [f64; 2], d: f64) -> [f64; 2] {
 /// samples (`points` keeps only them). `distances` is scratch space.
 fn robust_curve_fit(points: &mut Vec<[f64; 2]>, distances: &mut Vec<f64>) -> Option<CurveFit> {
     let first = fit_edge_curve(points, None)?;
+    // The distances twice: in point order for the cut, and a copy that the median reorders.
+    let n = points.len();
     distances.clear();
     distances.extend(
         points
             .iter()
             .map(|p| first.curve.distance(p[0], p[1]).abs()),
     );
-    let mid = distances.len() / 2;
-    let mad = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
+    distances.extend_from_within(..);
+    let (in_order, copy) = distances.split_at_mut(n);
+    let mad = *copy.select_nth_unstable_by(n / 2, f64::total_cmp).1;
     let limit = (3.5 * 1.4826 * mad).max(0.05);
-    let before = points.len();
-    points.retain(|p| first.curve.distance(p[0], p[1]).abs() <= limit);
-    if points.len() == before {
+    // `retain` visits the points once each, in order.
+    let mut next = in_order.iter();
+    points.retain(|_| next.next().is_some_and(|&d| d <= limit));
+    if points.len() == n {
         return Some(first);
     }
     fit_edge_curve(points, None)
@@ -652,6 +682,8 @@ fn walk_ray(
     let mut contrast_ref = 0.0f64;
     let mut reached = false;
     let mut tolerance = 1.0 + 0.5 * cfg.sigma;
+    // Whether the recent samples scatter little about their line (4 RMS under a pixel).
+    let mut clean = false;
     let guard = 2.5 * cfg.sigma + 1.0;
     loop {
         // Scanline geometry follows the current direction.
@@ -674,11 +706,11 @@ fn walk_ray(
         // Where the other edge (a straight line through the corner) crosses this scanline.
         let hw = cfg.half_width(d);
         let clash = if steep {
-            let y0 = q[1].round();
+            let y0 = round(q[1]);
             (other[1].abs() > 1e-9)
                 .then(|| (corner[0] + (y0 - corner[1]) * other[0] / other[1] - q[0]).abs())
         } else {
-            let x0 = q[0].round();
+            let x0 = round(q[0]);
             (other[0].abs() > 1e-9)
                 .then(|| (corner[1] + (x0 - corner[0]) * other[1] / other[0] - q[1]).abs())
         };
@@ -689,7 +721,7 @@ fn walk_ray(
             let along = if steep { d[1] } else { d[0] };
             (c / along.abs().max(0.5)) as f32
         });
-        let accepted = sample_edge_with(image, q, d, hw, fixed, &cfg.sigmoid).filter(|s| {
+        let acceptable = |s: &EdgeSample| {
             // Signed contrast across the ray's left normal (−d.y, d.x), whatever the scan axis.
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();
@@ -704,6 +736,19 @@ fn walk_ray(
             let similar =
                 out.len() < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
             near && same && similar
+        };
+        // Once the walk predicts from a line through clean samples, the prediction is a better
+        // start for the fit than the profile's own steepest crossing; where that fit fails or is
+        // not acceptable, the profile's own start has the last word, so no sample is lost.
+        // Under heavy noise a profile's least squares has several minima, and the prediction
+        // could pick another one than the steepest crossing does: the walk then keeps to the
+        // latter.
+        let predicted = (cfg.predicted_start && clean && out.len() >= PREDICTED_START)
+            .then(|| sample_edge_predicted(image, q, d, hw, fixed, &cfg.sigmoid))
+            .flatten()
+            .filter(|s| acceptable(s));
+        let accepted = predicted.or_else(|| {
+            sample_edge_with(image, q, d, hw, fixed, &cfg.sigmoid).filter(|s| acceptable(s))
         });
         let Some(s) = accepted else {
             misses += 1;
@@ -732,8 +777,9 @@ fn walk_ray(
                 anchor = on_line;
                 // The line absorbs two degrees of freedom of the scatter.
                 let n = recent.len() as f64;
-                tolerance =
-                    (4.0 * spread * (n / (n - 2.0)).sqrt()).clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+                let scatter = 4.0 * spread * (n / (n - 2.0)).sqrt();
+                tolerance = scatter.clamp(1.0, 1.0 + 0.5 * cfg.sigma);
+                clean = scatter < 1.0;
             }
         }
     }
@@ -746,6 +792,10 @@ fn walk_ray(
 
 /// Samples behind the prediction of the next one.
 const PREDICT_SAMPLES: usize = 24;
+
+/// Samples a walk has before its sigmoid fits start at the predicted crossing
+/// ([`sample_edge_predicted`]): from then on the prediction follows a line through them.
+const PREDICTED_START: usize = 6;
 
 /// Samples of each ray, nearest the corner first, that measure the offset between an edge's two
 /// rays ([`polarity_offset`]).
@@ -799,3 +849,28 @@ fn local_line(samples: &[EdgeSample], d: [f64; 2]) -> Option<([f64; 2], [f64; 2]
 
 /// Consecutive missed scanlines that end a walk.
 const MAX_MISSES: usize = 6;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ring_bilinear_matches_the_image() {
+        let (w, h) = (13, 9);
+        let data: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 101) as f32 * 0.7).collect();
+        let img = GrayImage::from_vec(w, h, data).unwrap();
+        for k in 0..4000 {
+            let (x, y) = (k as f32 * 0.0131 - 2.0, (k % 97) as f32 * 0.113 - 1.0);
+            assert_eq!(bilinear(&img, x, y), img.bilinear(x, y), "{x} {y}");
+        }
+        for (x, y) in [
+            (12.0, 3.0),
+            (3.0, 8.0),
+            (12.0, 8.0),
+            (f32::NAN, 1.0),
+            (13.5, 1.0),
+        ] {
+            assert_eq!(bilinear(&img, x, y), img.bilinear(x, y), "{x} {y}");
+        }
+    }
+}
