@@ -39,7 +39,7 @@ pub struct DetectParams {
     /// Board-wide fitting (III-D to III-F along whole grid lines), for [`RefineMode::Board`].
     pub board_fit: BoardFitParams,
     /// The last-resort refiner ([`crate::gradient`]): it places the corners that the local
-    /// refiner fails on, which otherwise keep their pixel-level position (`None`).
+    /// refiner fails on. `None` disables it, and those corners keep their pixel-level position.
     pub gradient: Option<GradientParams>,
     /// A board-wide answer whose σ exceeds this multiple of the board's median σ is doubtful:
     /// the corner goes to the local refiner, and to the gradient estimate unless the local
@@ -389,5 +389,62 @@ fn refine_corner(
         residual: r.residual,
         sigma: r.sigma,
         ..pixel_corner(c, row, col)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validate_names_the_bad_parameter() {
+        assert!(DetectParams::default().validate().is_ok());
+        let cases: [(DetectParams, &str); 4] = [
+            (
+                DetectParams {
+                    max_board_sigma: f64::NAN,
+                    ..DetectParams::default()
+                },
+                "sigma ratio",
+            ),
+            (
+                DetectParams {
+                    max_board_sigma: 0.0,
+                    ..DetectParams::default()
+                },
+                "sigma ratio",
+            ),
+            (
+                DetectParams {
+                    gradient: Some(GradientParams {
+                        radius: 0,
+                        ..GradientParams::default()
+                    }),
+                    ..DetectParams::default()
+                },
+                "gradient window radius",
+            ),
+            (
+                DetectParams {
+                    gradient: Some(GradientParams {
+                        window_sigma: f64::INFINITY,
+                        ..GradientParams::default()
+                    }),
+                    ..DetectParams::default()
+                },
+                "gradient window sigma",
+            ),
+        ];
+        for (params, name) in cases {
+            let e = params.validate().expect_err(name);
+            assert!(e.contains(name), "{e}");
+        }
+        // Disabling the last resort and the doubt check is valid.
+        let off = DetectParams {
+            gradient: None,
+            max_board_sigma: f64::INFINITY,
+            ..DetectParams::default()
+        };
+        assert!(off.validate().is_ok());
     }
 }
