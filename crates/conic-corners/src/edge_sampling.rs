@@ -27,6 +27,7 @@
 //! baseline x86-64; the lanes are added and the Gauss–Newton algebra done in `f64`. About
 //! 0.2 µs per 25-sample fit with a fixed width.
 
+use crate::prefilter::madd;
 use crate::GrayImage;
 
 /// Most samples [`fit_sigmoid`] accepts (the work arrays live on the stack).
@@ -369,16 +370,6 @@ impl Width {
     }
 }
 
-/// `a · b + c`, fused into one rounding where the CPU has FMA (the `FUSED` build), plain
-/// otherwise (a fused multiply-add without hardware support is a slow library call).
-#[inline(always)]
-fn madd<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
-    if FUSED {
-        a.mul_add(b, c)
-    } else {
-        a * b + c
-    }
-}
 
 /// Largest `|x|` [`exp_f32`] takes before clamping: `e^{±40}` keeps `σ²` and `g²` of the logistic
 /// above the smallest normal `f32` (denormals are slow), and a logistic `e^{−40}` from its

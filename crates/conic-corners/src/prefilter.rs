@@ -103,9 +103,10 @@ struct BandScratch {
 /// its inputs once, which matters more than the arithmetic here.
 const LANES: usize = 16;
 
-/// `a·b + c`, as one fused instruction when `FUSED` (only used where FMA is enabled).
+/// `a·b + c`, as one fused instruction when `FUSED` (only used where FMA is enabled: without
+/// hardware support a fused multiply-add is a slow library call). Shared with `edge_sampling`.
 #[inline(always)]
-fn madd<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
+pub(crate) fn madd<const FUSED: bool>(a: f32, b: f32, c: f32) -> f32 {
     if FUSED {
         a.mul_add(b, c)
     } else {
