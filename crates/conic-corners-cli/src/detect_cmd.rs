@@ -39,7 +39,7 @@ pub struct DetectArgs {
     /// refiner fails on, and doubtful board answers, take the gradient estimate (path `gradient`).
     #[arg(long = "refine", value_name = "MODE", default_value = "board", value_parser = ["local", "board"])]
     mode: String,
-    /// Print CSV rows (image,board,row,col,x,y,score,status) instead of JSON.
+    /// Print CSV rows (image,board,row,col,x,y,score,status,path,sigma) instead of JSON.
     #[arg(long)]
     csv: bool,
     #[command(flatten)]
@@ -106,15 +106,19 @@ fn csv_rows(path: &Path, det: &Detection) -> String {
     for (bi, b) in det.boards.iter().enumerate() {
         for c in &b.corners {
             let status = serde_json::to_value(c.status).expect("status serializes");
+            let how = serde_json::to_value(c.path).expect("path serializes");
+            // An empty sigma field where the corner has none (refinement failed).
+            let sigma = c.sigma.map_or(String::new(), |v| format!("{v:.6}"));
             out.push_str(&format!(
-                "{},{bi},{},{},{:.6},{:.6},{:.4},{}\n",
+                "{},{bi},{},{},{:.6},{:.6},{:.4},{},{},{sigma}\n",
                 csv_field(&path.display().to_string()),
                 c.row,
                 c.col,
                 c.x,
                 c.y,
                 c.score,
-                status.as_str().unwrap_or("")
+                status.as_str().unwrap_or(""),
+                how.as_str().unwrap_or("")
             ));
         }
     }
@@ -183,7 +187,7 @@ pub fn run(args: &DetectArgs) -> Result<(), String> {
         bar
     });
     if args.csv {
-        println!("image,board,row,col,x,y,score,status");
+        println!("image,board,row,col,x,y,score,status,path,sigma");
     }
     // Results are printed in input order as soon as every earlier image is done.
     let next = Mutex::new((

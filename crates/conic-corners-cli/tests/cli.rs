@@ -318,8 +318,15 @@ fn detect_finds_and_labels_a_rendered_board() {
         .unwrap();
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
-    assert!(text.starts_with("image,board,row,col,x,y,score,status\n"));
+    assert!(text.starts_with("image,board,row,col,x,y,score,status,path,sigma\n"));
     assert_eq!(text.lines().count(), 1 + truth.len());
+    for row in text.lines().skip(1) {
+        let f: Vec<&str> = row.split(',').collect();
+        assert_eq!(f.len(), 10, "{row}");
+        assert!(["board", "local", "gradient"].contains(&f[8]), "{row}");
+        let sigma: f64 = f[9].parse().expect("a placed corner has a sigma");
+        assert!(sigma > 0.0 && sigma < 1.0, "{row}");
+    }
 }
 
 #[test]

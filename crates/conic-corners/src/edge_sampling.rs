@@ -370,7 +370,6 @@ impl Width {
     }
 }
 
-
 /// Largest `|x|` [`exp_f32`] takes before clamping: `e^{±40}` keeps `σ²` and `g²` of the logistic
 /// above the smallest normal `f32` (denormals are slow), and a logistic `e^{−40}` from its
 /// asymptote is exact in `f32` anyway.
