@@ -30,7 +30,9 @@
 //!
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
+use crate::quadratic_form::worst_sigma;
 use crate::GrayImage;
+use nalgebra::Matrix2;
 
 /// Parameters of [`refine_gradient`]. `Default` is what [`crate::detect`] uses.
 #[derive(Clone, Debug, PartialEq)]
@@ -288,24 +290,11 @@ impl Patch {
             b[1] += v * xy;
             b[2] += v * yy;
         });
-        let det = Self::checked(a[0], a[1], a[2])?;
-        let inv = [a[2] / det, -a[1] / det, a[0] / det];
-        // C = A⁻¹ B A⁻¹ for symmetric 2×2 matrices stored as (xx, xy, yy).
-        let m = |x: [f64; 3], y: [f64; 3]| {
-            [
-                [x[0] * y[0] + x[1] * y[1], x[0] * y[1] + x[1] * y[2]],
-                [x[1] * y[0] + x[2] * y[1], x[1] * y[1] + x[2] * y[2]],
-            ]
-        };
-        let ib = m(inv, b);
-        let c = [
-            ib[0][0] * inv[0] + ib[0][1] * inv[1],
-            ib[0][0] * inv[1] + ib[0][1] * inv[2],
-            ib[1][0] * inv[1] + ib[1][1] * inv[2],
-        ];
-        let (tr, dt) = (c[0] + c[2], c[0] * c[2] - c[1] * c[1]);
-        let big = 0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt();
-        big.is_finite().then(|| big.sqrt())
+        Self::checked(a[0], a[1], a[2])?;
+        let ai = Matrix2::new(a[0], a[1], a[1], a[2]).try_inverse()?;
+        let c = ai * Matrix2::new(b[0], b[1], b[1], b[2]) * ai;
+        let sigma = worst_sigma([[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]]);
+        sigma.is_finite().then_some(sigma)
     }
 }
 

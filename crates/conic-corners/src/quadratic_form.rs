@@ -1478,16 +1478,22 @@ pub(crate) fn corner_covariance(
                 + if r == c { s2 } else { 0.0 };
         }
     }
-    let (tr, dt) = (
-        cov[0][0] + cov[1][1],
-        cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0],
-    );
-    let sigma = (0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt()).sqrt();
+    let sigma = worst_sigma(cov);
     sigma.is_finite().then_some(CornerCovariance {
         cov,
         sigma,
         sin_angle: det.abs(),
     })
+}
+
+/// Standard deviation (px) in the worst direction of a 2×2 covariance: the square root of its
+/// largest eigenvalue, `√(t/2 + √(t²/4 − d))` for trace `t` and determinant `d`.
+pub(crate) fn worst_sigma(cov: [[f64; 2]; 2]) -> f64 {
+    let (tr, dt) = (
+        cov[0][0] + cov[1][1],
+        cov[0][0] * cov[1][1] - cov[0][1] * cov[1][0],
+    );
+    (0.5 * tr + (0.25 * tr * tr - dt).max(0.0).sqrt()).sqrt()
 }
 
 #[cfg(test)]
