@@ -482,6 +482,12 @@ fn coarse_stride(fine: &[Corner]) -> Option<usize> {
             best.is_finite().then_some(best)
         })
         .collect();
+    stride_from_steps(&mut steps)
+}
+
+/// The coarse stride for the per-corner grid steps `steps` (reordered): the median step, at least
+/// four of them, scaled so that a template spans `COARSE_WINDOW_OF_STEP` steps; `None` below 2.
+fn stride_from_steps(steps: &mut [f64]) -> Option<usize> {
     if steps.len() < 4 {
         return None;
     }
@@ -975,13 +981,7 @@ mod tests {
                     .min_by(f64::total_cmp)
             })
             .collect();
-        if steps.len() < 4 {
-            return None;
-        }
-        let mid = steps.len() / 2;
-        let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
-        let stride = (COARSE_WINDOW_OF_STEP * step / TEMPLATE_SIDE as f64).floor();
-        (stride >= 2.0).then_some((stride as usize).min(MAX_STRIDE))
+        stride_from_steps(&mut steps)
     }
 
     #[test]
