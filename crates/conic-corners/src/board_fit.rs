@@ -48,7 +48,8 @@
 
 use crate::detect::Board;
 use crate::edge_sampling::{
-    blur_sigma_from_widths, next_scanline_point, sample_edge_with, Axis, SigmoidParams,
+    blur_sigma_from_widths, logistic_width, next_scanline_point, sample_edge_bounded,
+    sample_edge_with, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
     corner_covariance, edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve,
@@ -118,7 +119,8 @@ pub enum Path {
     /// The local refiner's answer (the input position), kept for the [`Fallback`] reason given.
     Local,
     /// The gradient-orthogonality estimate ([`crate::gradient`]): set by [`crate::detect`] where
-    /// the edge walks found too little to fit, or where the board-wide answer was doubtful.
+    /// the edge walks found too little to fit, or where the board-wide answer was doubtful (then
+    /// averaged with that answer if the two agree within the estimate's σ).
     Gradient,
 }
 
@@ -491,6 +493,13 @@ impl WalkConfig {
         let along = d[0].abs().max(d[1].abs()).max(0.5);
         ((3.0 * self.sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
     }
+
+    /// Fewest pixels a window cut short by a crossing edge keeps on that side: `2σ + 1` across the
+    /// edge, where a logistic with the blur's width is biased by about 0.01 px.
+    fn min_side(&self, d: [f64; 2]) -> usize {
+        let along = d[0].abs().max(d[1].abs()).max(0.5);
+        ((2.0 * self.sigma + 1.0) / along).ceil().max(3.0) as usize
+    }
 }
 
 /// One walk along an edge.
@@ -550,21 +559,46 @@ fn walk_edge(
         }
         count += 1;
         let hw = cfg.half_width(d);
-        let clash = w.clash.iter().flatten().any(|&(c, o)| {
+        // Where each crossing edge (a straight line through its corner) cuts this scanline,
+        // relative to q along the scanline.
+        let mut bounds = ScanBounds {
+            lo: f64::NEG_INFINITY,
+            hi: f64::INFINITY,
+            min_side: cfg.min_side(d),
+        };
+        let (q_scan, reach) = (if steep { q[0] } else { q[1] }, hw as f64 + cfg.guard);
+        let mut clash = false;
+        for &(c, o) in w.clash.iter().flatten() {
             let gap = if steep {
                 let y0 = q[1].round();
-                (o[1].abs() > 1e-9).then(|| (c[0] + (y0 - c[1]) * o[0] / o[1] - q[0]).abs())
+                (o[1].abs() > 1e-9).then(|| c[0] + (y0 - c[1]) * o[0] / o[1] - q[0])
             } else {
                 let x0 = q[0].round();
-                (o[0].abs() > 1e-9).then(|| (c[1] + (x0 - c[0]) * o[1] / o[0] - q[1]).abs())
+                (o[0].abs() > 1e-9).then(|| c[1] + (x0 - c[0]) * o[1] / o[0] - q[1])
             };
-            gap.is_some_and(|g| g <= hw as f64 + cfg.guard)
-        });
-        if clash {
-            continue;
+            match gap {
+                Some(g) if g.abs() <= reach => {
+                    clash = true;
+                    if g > 0.0 {
+                        bounds.hi = bounds.hi.min(q_scan + g - cfg.guard);
+                    } else {
+                        bounds.lo = bounds.lo.max(q_scan + g + cfg.guard);
+                    }
+                }
+                _ => {}
+            }
         }
         let n = out.len() - first;
-        let accepted = sample_edge_with(image, q, d, hw, None, &cfg.sigmoid).and_then(|s| {
+        // Near a junction the window stops short of the crossing edge; its cut side constrains
+        // the sigmoid's width poorly, so the width is the measured blur's.
+        let sample = if clash {
+            let along = if steep { d[1] } else { d[0] };
+            let fixed = (logistic_width(cfg.sigma) / along.abs().max(0.5)) as f32;
+            sample_edge_bounded(image, q, d, hw, bounds, Some(fixed), &cfg.sigmoid)
+        } else {
+            sample_edge_with(image, q, d, hw, None, &cfg.sigmoid)
+        };
+        let accepted = sample.and_then(|s| {
             // Signed contrast across the walk's left normal, whatever the scan axis.
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();

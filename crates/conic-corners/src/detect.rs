@@ -43,11 +43,11 @@ pub struct DetectParams {
     pub gradient: Option<GradientParams>,
     /// A board-wide answer whose σ exceeds this multiple of the board's median σ is doubtful:
     /// the corner goes to the local refiner, and to the gradient estimate unless the local
-    /// refiner converges with both edges seen on both sides. It happens at the ends of grid
-    /// lines next to a silhouette, where the squares are foreshortened to a few pixels and the
-    /// curves are extrapolated. The limit is relative so that it holds at any image scale, blur
-    /// and noise; on the curved-board benchmark 3, 5 and 10 give the same accuracy within
-    /// 4 %. `∞` keeps every board-wide answer.
+    /// refiner converges with both edges seen on both sides; a gradient estimate that agrees
+    /// with the board-wide answer within its σ is averaged with it, one that does not replaces
+    /// it. It happens at the ends of grid lines next to a silhouette, where the squares are
+    /// foreshortened to a few pixels and the curves are extrapolated. The limit is relative so
+    /// that it holds at any image scale, blur and noise. `∞` keeps every board-wide answer.
     pub max_board_sigma: f64,
 }
 
@@ -283,9 +283,23 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     (Status::Fallback, None) => (false, local),
                     (Status::Failed, board) => (true, board.unwrap_or(local)),
                 };
-                match &params.gradient {
-                    Some(g) if weak => gradient_corner(image, pixel, g).unwrap_or(last),
-                    _ => last,
+                let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
+                    return last;
+                };
+                match (gradient_corner(image, pixel, g), board) {
+                    // Two independent estimates that agree within the gradient estimate's σ:
+                    // their mean. Where they disagree, the doubtful board-wide answer (short,
+                    // extrapolated curves) is the likelier to be wrong.
+                    (Some(gc), Some(b))
+                        if (gc.x - b.x).hypot(gc.y - b.y) <= gc.sigma.unwrap_or(0.0) =>
+                    {
+                        DetectedCorner {
+                            x: 0.5 * (gc.x + b.x),
+                            y: 0.5 * (gc.y + b.y),
+                            ..gc
+                        }
+                    }
+                    (gc, _) => gc.unwrap_or(last),
                 }
             })
             .collect();

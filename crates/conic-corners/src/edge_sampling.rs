@@ -738,6 +738,7 @@ pub fn sample_edge_with(
         fixed_width,
         params,
         false,
+        None,
     )
 }
 
@@ -766,10 +767,53 @@ pub fn sample_edge_predicted(
         fixed_width,
         params,
         true,
+        None,
     )
 }
 
-/// [`sample_edge_with`], the first fit started at the predicted crossing if `predicted`.
+/// Limits of a profile window along its scanline, for [`sample_edge_bounded`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScanBounds {
+    /// Lowest scanline coordinate (px: x on a row, y on a column) the window may cover.
+    pub lo: f64,
+    /// Highest scanline coordinate the window may cover.
+    pub hi: f64,
+    /// Fewest pixels the window must keep on each side of its centre pixel.
+    pub min_side: usize,
+}
+
+/// [`sample_edge_with`] with the profile window cut to `bounds` along the scanline: near a
+/// junction, where the full window would reach the crossing edge, the window stops short of it
+/// and keeps at least `bounds.min_side` pixels on that side. Give a `fixed_width`: the cut side
+/// constrains the width poorly. A logistic fitted to a Gaussian-blurred edge on an asymmetric
+/// window is slightly biased (about 0.01 px for a side of `2σ + 1` px across the edge).
+///
+/// Returns `None` where [`sample_edge_with`] would, or where the bounds leave less than
+/// `min_side` pixels on either side of the window's centre.
+pub fn sample_edge_bounded(
+    image: &GrayImage,
+    point: [f64; 2],
+    direction: [f64; 2],
+    half_width: usize,
+    bounds: ScanBounds,
+    fixed_width: Option<f32>,
+    params: &SigmoidParams,
+) -> Option<EdgeSample> {
+    sample_edge_impl(
+        image,
+        point,
+        direction,
+        half_width,
+        fixed_width,
+        params,
+        false,
+        Some(bounds),
+    )
+}
+
+/// [`sample_edge_with`], the first fit started at the predicted crossing if `predicted`, the
+/// windows cut to `bounds` if given.
+#[allow(clippy::too_many_arguments)]
 fn sample_edge_impl(
     image: &GrayImage,
     point: [f64; 2],
@@ -778,6 +822,7 @@ fn sample_edge_impl(
     fixed_width: Option<f32>,
     params: &SigmoidParams,
     predicted: bool,
+    bounds: Option<ScanBounds>,
 ) -> Option<EdgeSample> {
     if point.iter().chain(&direction).any(|v| !v.is_finite())
         || !(3..=MAX_HALF_WIDTH).contains(&half_width)
@@ -803,27 +848,47 @@ fn sample_edge_impl(
             (x0, point[1] + ty / tx * (x0 - point[0]))
         }
     };
+    // The window around a centre pixel: its first pixel and length.
+    let h = half_width as f64;
+    let window = |centre: f64| -> Option<(f64, usize)> {
+        let (mut first, mut last) = (centre - h, centre + h);
+        if let Some(b) = bounds {
+            first = first.max(b.lo.ceil());
+            last = last.min(b.hi.floor());
+            let side = b.min_side as f64;
+            if !(centre - first >= side && last - centre >= side) {
+                return None;
+            }
+        }
+        Some((first, (last - first) as usize + 1))
+    };
     let centre = round(cross);
-    let first = scanline_fit(image, axis, fixed, centre, half_width, |profile| {
+    let (first, n) = window(centre)?;
+    let found = scanline_fit(image, axis, fixed, first, n, |profile| {
         // The predicted crossing in the window's coordinates.
         let start = predicted.then(|| {
             let width = fixed_width.map_or(1.0, |c| c as f64);
-            (cross - centre + half_width as f64, width)
+            (cross - first, width)
         });
         fit_sigmoid_from(profile, fixed_width, params, start)
     })?;
     // The logistic is not the exact profile, so a window off-centre from the edge biases the
     // position (σ = 2: 0.008 px at 2 px, 0.017 px at 4 px off): refit once on a centred window.
-    let found = first.0 + first.1.position;
-    let found_centre = round(found);
+    let at = found.0 + found.1.position;
+    let found_centre = round(at);
     let (start, fit) = if found_centre != centre {
-        scanline_fit(image, axis, fixed, found_centre, half_width, |profile| {
+        let (first, n) = window(found_centre)?;
+        scanline_fit(image, axis, fixed, first, n, |profile| {
             // The same edge, in the shifted window's coordinates.
-            let p = found - (found_centre - half_width as f64);
-            fit_sigmoid_from(profile, fixed_width, params, Some((p, first.1.width)))
+            fit_sigmoid_from(
+                profile,
+                fixed_width,
+                params,
+                Some((at - first, found.1.width)),
+            )
         })?
     } else {
-        first
+        found
     };
     let along = start + fit.position;
     let point = match axis {
@@ -860,25 +925,23 @@ pub(crate) fn round(x: f64) -> f64 {
     r.copysign(x)
 }
 
-/// Fits the `2h + 1` pixels of the row (`Axis::X`, `y = fixed`) or column (`Axis::Y`, `x = fixed`)
-/// centred on pixel `centre` of the scanline with `fit`; returns the first pixel's coordinate and
-/// the fit.
+/// Fits the `n` pixels of the row (`Axis::X`, `y = fixed`) or column (`Axis::Y`, `x = fixed`)
+/// from pixel `first` of the scanline on with `fit`; returns `first` and the fit.
 fn scanline_fit(
     image: &GrayImage,
     axis: Axis,
     fixed: f64,
-    centre: f64,
-    half_width: usize,
+    first: f64,
+    n: usize,
     fit: impl FnOnce(&[f32]) -> Option<SigmoidFit>,
 ) -> Option<(f64, SigmoidFit)> {
     let (len_fixed, len_scan) = match axis {
         Axis::X => (image.height(), image.width()),
         Axis::Y => (image.width(), image.height()),
     };
-    let n = 2 * half_width + 1;
-    let first = centre - half_width as f64;
     if !(fixed >= 0.0 && fixed < len_fixed as f64 && first >= 0.0)
         || first + (n as f64) > len_scan as f64
+        || n > MAX_SAMPLES
     {
         return None;
     }
@@ -908,6 +971,13 @@ pub fn next_scanline_point(anchor: [f64; 2], d: [f64; 2], stride: usize) -> [f64
         let dx = d[0].signum() * s;
         [anchor[0] + dx, anchor[1] + d[1] / d[0] * dx]
     }
+}
+
+/// Logistic width `c` (px) across an edge blurred by a Gaussian of `sigma` px and area-sampled by
+/// pixels: `√(σ² + 1/12) / K`, `K =` [`LOGISTIC_TO_GAUSSIAN`] (the inverse of
+/// [`blur_sigma_from_widths`]).
+pub fn logistic_width(sigma: f64) -> f64 {
+    (sigma * sigma + 1.0 / 12.0).sqrt() / LOGISTIC_TO_GAUSSIAN
 }
 
 /// Gaussian blur σ (pixels) estimated from logistic widths measured across straight edges of an
@@ -1306,6 +1376,42 @@ mod tests {
         // Bad input is still refused.
         assert!(sample_edge_predicted(&img, [f64::NAN, 1.0], t, 10, None, &params).is_none());
         assert!(sample_edge_predicted(&img, q, [0.0, 0.0], 10, None, &params).is_none());
+    }
+
+    #[test]
+    fn bounded_window_keeps_clear_of_a_crossing_edge() {
+        // A dark stripe: the edge at 20.3 and, 6.7 px on, its far side. A full ±8 px window
+        // holds both; the window cut 2.5σ + 1 px short of the far side measures the first alone.
+        let (sigma, e1, e2) = (1.0, 20.3, 27.0);
+        let rise = |e: f64| edge_image(50, 20, [e, 10.0], [1.0, 0.0], sigma, 0.0, 1.0);
+        let (a, b) = (rise(e1), rise(e2));
+        let data: Vec<f32> = (0..20)
+            .flat_map(|y| (0..50).map(move |x| (y, x)))
+            .map(|(y, x)| 200.0 - 150.0 * (a.get(x, y) - b.get(x, y)))
+            .collect();
+        let img = GrayImage::from_vec(50, 20, data).unwrap();
+        let (t, c) = ([0.0, 1.0], logistic_width(sigma) as f32);
+        let params = SigmoidParams::default();
+        let full = sample_edge_with(&img, [e1, 10.0], t, 8, Some(c), &params);
+        assert!(
+            full.is_none_or(|s| (s.point[0] - e1).abs() > 0.05),
+            "{full:?}"
+        );
+        let bounds = ScanBounds {
+            lo: f64::NEG_INFINITY,
+            hi: e2 - (2.5 * sigma + 1.0),
+            min_side: 3,
+        };
+        let s = sample_edge_bounded(&img, [e1, 10.0], t, 8, bounds, Some(c), &params).unwrap();
+        assert!((s.point[0] - e1).abs() < 0.015, "{s:?}");
+        // Too little room on the cut side: no sample.
+        let tight = ScanBounds {
+            min_side: 4,
+            ..bounds
+        };
+        assert!(sample_edge_bounded(&img, [e1, 10.0], t, 8, tight, Some(c), &params).is_none());
+        let none = ScanBounds { hi: e1, ..bounds };
+        assert!(sample_edge_bounded(&img, [e1, 10.0], t, 8, none, Some(c), &params).is_none());
     }
 
     #[test]

@@ -24,8 +24,8 @@
 //! centre of the top-left pixel.
 
 use crate::edge_sampling::{
-    blur_sigma_from_widths, next_scanline_point, round, sample_edge_predicted, sample_edge_with,
-    Axis, EdgeSample, SigmoidParams, LOGISTIC_TO_GAUSSIAN,
+    blur_sigma_from_widths, logistic_width, next_scanline_point, round, sample_edge_predicted,
+    sample_edge_with, Axis, EdgeSample, SigmoidParams,
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
@@ -331,7 +331,7 @@ impl WalkConfig {
             start: 2.5 * sigma + 3.0,
             reach,
             stride,
-            normal_width: Some(normal_width(sigma)),
+            normal_width: Some(logistic_width(sigma)),
             sigmoid: SigmoidParams {
                 min_contrast_to_noise: 2.5,
                 ..SigmoidParams::default()
@@ -344,7 +344,7 @@ impl WalkConfig {
     /// floor since each sample must also fall near its predicted position.
     fn measure(sigma: f64, reach: f64, stride: usize) -> Self {
         Self {
-            normal_width: Some(normal_width(sigma)),
+            normal_width: Some(logistic_width(sigma)),
             sigmoid: SigmoidParams {
                 min_contrast_to_noise: 2.0,
                 ..SigmoidParams::default()
@@ -360,11 +360,6 @@ impl WalkConfig {
         let along = d[0].abs().max(d[1].abs()).max(0.5);
         ((3.0 * self.sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
     }
-}
-
-/// Logistic width across an edge blurred by a Gaussian of `sigma` px and area-sampled by pixels.
-fn normal_width(sigma: f64) -> f64 {
-    (sigma * sigma + 1.0 / 12.0).sqrt() / LOGISTIC_TO_GAUSSIAN
 }
 
 /// The samples of the four rays of one corner, reused between passes (no allocation per sample).

@@ -29,7 +29,7 @@ with a standard deviation in ``Board.sigmas`` like every placed corner) and :dat
 gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort); :func:`detect`
 fits board-wide by default and falls back to the local refiner per corner where a grid line has too
 few samples, and to the gradient estimate where the local refiner fails or the board-wide answer is
-doubtful (foreshortened squares at a silhouette).
+doubtful (foreshortened squares at a silhouette; there the two are averaged where they agree).
 
 Errors: a wrong dtype raises ``TypeError``; a wrong shape, an empty array, non-finite values or an
 out-of-range parameter raise ``ValueError``.
