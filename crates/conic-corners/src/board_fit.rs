@@ -162,6 +162,10 @@ pub struct FittedCorner {
     pub cov: [[f64; 2]; 2],
     /// `√` of the larger eigenvalue of `cov`: the standard deviation (px) in the worst direction.
     pub sigma: f64,
+    /// Where the row and column curves meet, when that was rejected for lying too far from the
+    /// local answer ([`Fallback::TooFar`]): if the local answer is itself doubtful (the refiner
+    /// failed there), the junction is likelier here.
+    pub too_far: Option<[f64; 2]>,
 }
 
 /// Whether a fitted line runs along a row or a column of the board.
@@ -313,6 +317,7 @@ fn local_corner(
         fallback: Some(why),
         cov: [[s * s, 0.0], [0.0, s * s]],
         sigma: s,
+        too_far: None,
     }
 }
 
@@ -808,7 +813,9 @@ const NORMAL_SPAN: usize = 4;
 /// At each corner `j` the jump `δⱼ` is measured by [`edge_jump`] on the last and first
 /// [`JUMP_SAMPLES`] samples before and after it, and `Dⱼ = (−1)ʲ⁺¹ δⱼ` is the offset there.
 /// Offsets are corrected only if their median `D` is larger than three standard
-/// errors (`1.4826 MAD √(π / 2n)`), so a clean print is left untouched. Each `Dⱼ` is then
+/// errors (`1.4826 MAD √(π / 2n)`), so a clean print is left untouched. A `Dⱼ` more than
+/// `max(4 · 1.4826 MAD, 0.5 px)` from `D` is an outlier (a pen stroke through the junction) and
+/// is replaced by `D`. Each `Dⱼ` is then
 /// replaced by the median of it and its two neighbours (a missing one by `D`), because on a bent
 /// board the offset in px changes along the line with the foreshortening, and segment `k`
 /// (samples between corners `k − 1` and `k`) is shifted by `−(−1)ᵏ D/2` along the unit normal of
@@ -840,7 +847,14 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
     if offset.abs() <= 3.0 * se {
         return 0.0;
     }
-    let at = |j: usize| local[j].unwrap_or(offset);
+    // A jump far from the line's median is not dot gain but a stray sample run (a pen stroke
+    // through the junction, a corner placed off its junction): it takes the median.
+    let limit = (4.0 * 1.4826 * mad).max(0.5);
+    let at = |j: usize| {
+        local[j]
+            .filter(|d| (d - offset).abs() <= limit)
+            .unwrap_or(offset)
+    };
     let smooth: Vec<f64> = (0..cuts.len())
         .map(|j| {
             let mut w = [
@@ -1050,7 +1064,10 @@ fn intersect_corner(
         return fallback(Fallback::NoIntersection);
     }
     if dist(p, local) > params.max_shift {
-        return fallback(Fallback::TooFar);
+        return FittedCorner {
+            too_far: Some(p),
+            ..fallback(Fallback::TooFar)
+        };
     }
     // `None`: a normal is undefined or the curves are parallel at `p`.
     let Some(c) = corner_covariance(
@@ -1075,6 +1092,7 @@ fn intersect_corner(
         fallback: None,
         cov: c.cov,
         sigma: c.sigma,
+        too_far: None,
     }
 }
 
@@ -1253,6 +1271,32 @@ mod tests {
         let (e, n) = rms(st.board.iter().map(|b| b.1));
         assert!(n >= 40, "{n} board, {} local", st.local);
         assert!(e < 0.04, "S RMS {e}");
+    }
+
+    #[test]
+    fn polarity_offset_ignores_stray_jumps() {
+        // A straight line along x: 12 segments of 20 samples, each polarity 0.8 px off the line
+        // (dot gain). A stray run lifts segment 6 by 6 px (as a pen stroke along the edge would),
+        // which fakes an outlying jump at corners 5 and 6. The offset is still measured from the
+        // rest, and every other segment lands back on the line.
+        let (segments, per) = (12usize, 20usize);
+        let noise = [0.01, -0.02, 0.015, -0.005, 0.0];
+        let mut pts: Vec<[f64; 2]> = (0..segments * per)
+            .map(|i| {
+                let k = i / per;
+                let side = if k % 2 == 0 { 0.8 } else { -0.8 };
+                let stray = if k == 6 { 6.0 } else { 0.0 };
+                [i as f64, side + stray + noise[i % noise.len()]]
+            })
+            .collect();
+        let cuts: Vec<(usize, usize)> = (1..segments).map(|j| (j, j * per)).collect();
+        let offset = remove_polarity_offset(&mut pts, &cuts);
+        assert!((offset.abs() - 1.6).abs() < 0.05, "{offset}");
+        for (i, p) in pts.iter().enumerate() {
+            if i / per != 6 {
+                assert!(p[1].abs() < 0.05, "sample {i}: {p:?}");
+            }
+        }
     }
 
     #[test]

@@ -273,7 +273,25 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     Some(nb) => neighbour_reach(&corners, nb, i),
                     None => label_reach(&corners, b, i),
                 };
-                let local = refine_corner(image, &corners[i], row, col, reach, &params.refine);
+                let mut local = refine_corner(image, &corners[i], row, col, reach, &params.refine);
+                // The refiner failed at the pixel-level position, which can be off the junction
+                // (a pen stroke through it moves the election's maximum): it gets two more
+                // starts, where the board's curves meet (when that was too far from the pixel
+                // position to be taken) and where the corner's neighbours put it. Only a
+                // converged answer that confirms its start (within the board fit's `max_shift`)
+                // counts: one farther off has found another junction.
+                if local.status == Status::Failed {
+                    let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
+                    let predicted = neighbour_prediction(&corners, b, (row, col));
+                    let confirmed = too_far.into_iter().chain(predicted).find_map(|[x, y]| {
+                        let start = Corner { x, y, ..corners[i] };
+                        let again = refine_corner(image, &start, row, col, reach, &params.refine);
+                        (again.status == Status::Converged
+                            && (again.x - x).hypot(again.y - y) <= params.board_fit.max_shift)
+                            .then_some(again)
+                    });
+                    local = confirmed.unwrap_or(local);
+                }
                 // A doubtful board-wide answer means short, extrapolated curves, where the
                 // local refiner's one-sided answer is no better; failing the gradient
                 // estimate, the board-wide answer stands.
@@ -322,6 +340,35 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             total: ms(t0),
         },
     }
+}
+
+/// Where the labelled neighbours of the corner at `(row, col)` put it: the mean of the midpoints
+/// of its opposite neighbours, `(row, col ± 1)` and `(row ± 1, col)`, at their pixel-level
+/// positions; `None` when neither pair is on the board. On a bent board a midpoint is off by
+/// about `κ s² / 8` (`s` the square's side, `κ` the line's curvature): well within the
+/// refiner's reach for a start.
+fn neighbour_prediction(
+    corners: &[Corner],
+    board: &LabelledBoard,
+    (row, col): (i32, i32),
+) -> Option<[f64; 2]> {
+    let at = |label: (i32, i32)| {
+        let k = board.labels.iter().position(|&l| l == label)?;
+        Some(&corners[board.corners[k]])
+    };
+    let pairs = [
+        ((row, col - 1), (row, col + 1)),
+        ((row - 1, col), (row + 1, col)),
+    ];
+    let (mut sum, mut n) = ([0.0; 2], 0.0);
+    for (a, b) in pairs {
+        if let (Some(a), Some(b)) = (at(a), at(b)) {
+            sum[0] += 0.5 * (a.x + b.x);
+            sum[1] += 0.5 * (a.y + b.y);
+            n += 1.0;
+        }
+    }
+    (n > 0.0).then(|| [sum[0] / n, sum[1] / n])
 }
 
 /// The distance to the farthest grid neighbour: an edge walk has no business beyond it (it would
@@ -409,6 +456,48 @@ fn refine_corner(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn neighbours_predict_a_corner_from_opposite_pairs() {
+        let corner = |x: f64, y: f64| Corner {
+            x,
+            y,
+            angles: [0.0, std::f64::consts::FRAC_PI_2],
+            score: 1.0,
+        };
+        // (1, 1) sits between (1, 0) and (1, 2), and between (0, 1) and (2, 1).
+        let corners = vec![
+            corner(10.0, 20.0),
+            corner(30.0, 22.0),
+            corner(20.0, 10.0),
+            corner(20.0, 31.0),
+            corner(99.0, 99.0),
+        ];
+        let board = LabelledBoard {
+            corners: vec![2, 0, 4, 1, 3],
+            labels: vec![(0, 1), (1, 0), (1, 1), (1, 2), (2, 1)],
+            rows: 3,
+            cols: 3,
+        };
+        let p = neighbour_prediction(&corners, &board, (1, 1)).unwrap();
+        assert!(
+            (p[0] - 20.0).abs() < 1e-12 && (p[1] - 20.75).abs() < 1e-12,
+            "{p:?}"
+        );
+        // No complete pair: nothing. One pair only: its midpoint.
+        assert_eq!(neighbour_prediction(&corners, &board, (1, 0)), None);
+        let row_only = LabelledBoard {
+            corners: vec![0, 4, 1],
+            labels: vec![(1, 0), (1, 1), (1, 2)],
+            rows: 1,
+            cols: 3,
+        };
+        assert_eq!(
+            neighbour_prediction(&corners, &row_only, (1, 1)),
+            Some([20.0, 21.0])
+        );
+        assert_eq!(neighbour_prediction(&corners, &row_only, (1, 0)), None);
+    }
 
     #[test]
     fn validate_names_the_bad_parameter() {

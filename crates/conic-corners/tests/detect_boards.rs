@@ -8,6 +8,7 @@
 //! shift (so truth neighbours differ by ±1 on one axis), and the refined positions' RMS error.
 
 use conic_corners::detect::{detect, DetectParams, Detection};
+use conic_corners::refine::Status;
 use conic_corners::synth::board::{
     random_board_scene, BoardCorner, BoardScene, Dots, Occluder, Surface,
 };
@@ -314,6 +315,19 @@ fn real_photos_when_present() {
         eprintln!("{name}: {} boards, {n} corners", det.boards.len());
         assert!(n >= at_least, "{name}: {n} corners, expected ≥ {at_least}");
         assert_eq!(det.boards.len(), 1, "{name}");
+        if name == "marker_real2.jpg" {
+            // A pen stroke runs through the junction of (6, 8) and pulls the election's maximum
+            // 11 px off it; the refiner's second start (from the neighbours) finds the junction.
+            // Its centre, read off the pixel rows: the vertical edges at x = 1937.3 above and
+            // 1939.6 below (dot gain), the horizontal edge at y = 1458.6.
+            let c = det.boards[0]
+                .corners
+                .iter()
+                .find(|c| (c.row, c.col) == (6, 8))
+                .expect("corner (6, 8)");
+            assert_eq!(c.status, Status::Converged, "{c:?}");
+            assert!((c.x - 1938.5).hypot(c.y - 1459.0) < 1.5, "{c:?}");
+        }
         let hulls: Vec<_> = det
             .boards
             .iter()
