@@ -162,10 +162,10 @@ pub struct FittedCorner {
     pub cov: [[f64; 2]; 2],
     /// `√` of the larger eigenvalue of `cov`: the standard deviation (px) in the worst direction.
     pub sigma: f64,
-    /// Where the row and column curves meet, when that was rejected for lying too far from the
-    /// local answer ([`Fallback::TooFar`]): if the local answer is itself doubtful (the refiner
-    /// failed there), the junction is likelier here.
-    pub too_far: Option<[f64; 2]>,
+    /// Where the row and column curves meet and the σ (px, worst direction) there, when that
+    /// was rejected for lying too far from the local answer ([`Fallback::TooFar`]): if the local
+    /// answer is itself doubtful (the refiner failed there), the junction is likelier here.
+    pub too_far: Option<([f64; 2], f64)>,
 }
 
 /// Whether a fitted line runs along a row or a column of the board.
@@ -1063,12 +1063,6 @@ fn intersect_corner(
     if !(p[0].is_finite() && p[1].is_finite()) {
         return fallback(Fallback::NoIntersection);
     }
-    if dist(p, local) > params.max_shift {
-        return FittedCorner {
-            too_far: Some(p),
-            ..fallback(Fallback::TooFar)
-        };
-    }
     // `None`: a normal is undefined or the curves are parallel at `p`.
     let Some(c) = corner_covariance(
         &a.curve,
@@ -1082,6 +1076,12 @@ fn intersect_corner(
     };
     if c.sin_angle < params.min_angle_deg.to_radians().sin() {
         return fallback(Fallback::Tangent);
+    }
+    if dist(p, local) > params.max_shift {
+        return FittedCorner {
+            too_far: Some((p, c.sigma)),
+            ..fallback(Fallback::TooFar)
+        };
     }
     FittedCorner {
         row,

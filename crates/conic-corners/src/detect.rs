@@ -136,8 +136,10 @@ pub struct DetectedCorner {
     /// Template-matching score of the corner (normalized cross-correlation).
     pub score: f64,
     /// How the subpixel position was obtained: `Converged` for board-wide answers and the local
-    /// refiner's full answers, `Fallback` for its answers with less support and for the gradient
-    /// estimate, `Failed` keeps the pixel-level position.
+    /// refiner's full answers, `Fallback` for its answers with less support, for the gradient
+    /// estimate, and for a board-wide answer taken although it lies farther than the board fit's
+    /// `max_shift` from the pixel-level position (only where no refiner could place the corner);
+    /// `Failed` keeps the pixel-level position.
     pub status: Status,
     /// RMS distance (px) of the edge samples to their curves; `None` when not refined.
     pub residual: Option<f64>,
@@ -280,10 +282,11 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // position to be taken) and where the corner's neighbours put it. Only a
                 // converged answer that confirms its start (within the board fit's `max_shift`)
                 // counts: one farther off has found another junction.
+                let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
                 if local.status == Status::Failed {
-                    let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
                     let predicted = neighbour_prediction(&corners, b, (row, col));
-                    let confirmed = too_far.into_iter().chain(predicted).find_map(|[x, y]| {
+                    let starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
+                    let confirmed = starts.into_iter().find_map(|[x, y]| {
                         let start = Corner { x, y, ..corners[i] };
                         let again = refine_corner(image, &start, row, col, reach, &params.refine);
                         (again.status == Status::Converged
@@ -301,10 +304,23 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     (Status::Fallback, None) => (false, local),
                     (Status::Failed, board) => (true, board.unwrap_or(local)),
                 };
-                let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
-                    return last;
+                // When nothing else places the corner, the curves' intersection beats the
+                // unrefined pixel position.
+                let curves = |c: DetectedCorner| match too_far {
+                    Some(([x, y], sigma)) if c.status == Status::Failed => DetectedCorner {
+                        x,
+                        y,
+                        status: Status::Fallback,
+                        path: Path::Board,
+                        sigma: Some(sigma),
+                        ..c
+                    },
+                    _ => c,
                 };
-                match (gradient_corner(image, pixel, g), board) {
+                let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
+                    return curves(last);
+                };
+                curves(match (gradient_corner(image, pixel, g), board) {
                     // Two independent estimates that agree within the gradient estimate's σ:
                     // their mean. Where they disagree, the doubtful board-wide answer (short,
                     // extrapolated curves) is the likelier to be wrong.
@@ -318,7 +334,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         }
                     }
                     (gc, _) => gc.unwrap_or(last),
-                }
+                })
             })
             .collect();
         refine_ms += ms(t);

@@ -315,6 +315,15 @@ fn real_photos_when_present() {
         eprintln!("{name}: {} boards, {n} corners", det.boards.len());
         assert!(n >= at_least, "{name}: {n} corners, expected ≥ {at_least}");
         assert_eq!(det.boards.len(), 1, "{name}");
+        // Every labelled corner is placed: where the refiners fail (pen strokes through the
+        // junction), the board's curves still meet.
+        let failed: Vec<(i32, i32)> = det.boards[0]
+            .corners
+            .iter()
+            .filter(|c| c.status == Status::Failed)
+            .map(|c| (c.row, c.col))
+            .collect();
+        assert!(failed.is_empty(), "{name}: unplaced corners {failed:?}");
         if name == "marker_real2.jpg" {
             // A pen stroke runs through the junction of (6, 8) and pulls the election's maximum
             // 11 px off it; the refiner's second start (from the neighbours) finds the junction.
