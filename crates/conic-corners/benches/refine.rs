@@ -1,7 +1,8 @@
 //! Speed of the single-corner refiner: `cargo bench -p conic-corners --bench refine`.
 //!
 //! One corner of the paper's noise test (σn 3 %, blur 3 px, κ ≈ 1.2·10⁻³, φ ≈ 10°), refined from
-//! the truth rounded to the nearest pixel, with the default parameters and with shorter walks.
+//! the truth rounded to the nearest pixel, with the default parameters and with shorter or sparser
+//! walks (every second scanline), which trade accuracy for speed (see BENCHMARKS.md).
 
 use conic_corners::refine::{refine_one, RefineParams};
 use conic_corners::synth::{scene_for, Protocol};
@@ -14,12 +15,17 @@ fn bench_refine(c: &mut Criterion) {
     let rendered = scene.render(7).expect("valid scene");
     let start = [rendered.truth[0].round(), rendered.truth[1].round()];
     let mut group = c.benchmark_group("refine_one");
-    for reach in [100.0, 50.0, 25.0] {
+    for (reach, stride) in [(100.0, 1), (50.0, 1), (25.0, 1), (50.0, 2), (25.0, 2)] {
         let params = RefineParams {
             reach,
+            stride,
             ..RefineParams::default()
         };
-        group.bench_function(format!("reach{reach}"), |b| {
+        let name = match stride {
+            1 => format!("reach{reach}"),
+            _ => format!("reach{reach}_stride{stride}"),
+        };
+        group.bench_function(name, |b| {
             b.iter(|| refine_one(black_box(&rendered.image), black_box(start), &params))
         });
     }
