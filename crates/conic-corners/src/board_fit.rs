@@ -996,7 +996,8 @@ struct Chosen {
 /// Each piece is also fitted within `support / 2`, and the fit with the smaller variance at the
 /// corner is kept: where the segmentation missed an inflection (short chains on a small, strongly
 /// bent board), no single model holds over the wide window, and the misfit shows in its residual
-/// variance.
+/// variance. Variances are compared by their 95 % upper confidence bounds, so that a fit to a few
+/// samples does not win by the luck of its residuals.
 fn choose_segment(
     line: &FittedLine,
     cut: usize,
@@ -1008,7 +1009,7 @@ fn choose_segment(
         let (a, b) = s.samples;
         (a < cut && b > cut) || b == cut || a == cut
     });
-    let mut best: Option<(Chosen, bool)> = None;
+    let mut best: Option<(Chosen, bool, f64)> = None;
     let (mut enough, mut scratch) = (false, Vec::new());
     for (seg, reach) in candidates.flat_map(|s| [(s, support), (s, 0.5 * support)]) {
         let (a, b) = seg.samples;
@@ -1028,21 +1029,21 @@ fn choose_segment(
         if kept < min_near {
             continue;
         }
-        let variance = st.variance_at(p);
-        if !variance.is_finite() {
+        let (variance, bound) = (st.variance_at(p), st.variance_bound_at(p));
+        if !(variance.is_finite() && bound.is_finite()) {
             continue;
         }
         let straddles = a < cut && b > cut;
         let better = match &best {
             None => true,
-            Some((b, bs)) => (straddles && !bs) || (straddles == *bs && variance < b.variance),
+            Some((_, bs, bb)) => (straddles && !bs) || (straddles == *bs && bound < *bb),
         };
         if better {
-            best = Some((Chosen { curve, variance }, straddles));
+            best = Some((Chosen { curve, variance }, straddles, bound));
         }
     }
     match best {
-        Some((c, _)) => Ok(c),
+        Some((c, _, _)) => Ok(c),
         None if enough => Err(Fallback::FitFailed),
         None => Err(Fallback::FewSamples),
     }

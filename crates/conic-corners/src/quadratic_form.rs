@@ -1328,6 +1328,8 @@ pub(crate) struct PositionStats {
     inverse: Matrix5<f64>,
     degree: usize,
     s2: f64,
+    /// Degrees of freedom of `s2`: samples minus parameters.
+    dof: f64,
 }
 
 impl PositionStats {
@@ -1406,7 +1408,18 @@ impl PositionStats {
             inverse: gram.try_inverse()?,
             degree,
             s2: rss / (n - params),
+            dof: n - params,
         })
+    }
+
+    /// [`Self::variance_at`] scaled by `ν / χ²₀.₀₅(ν)` (`ν` the residuals' degrees of freedom): a
+    /// 95 % upper confidence bound. Choosing between fits by their variance favours the one
+    /// whose few residuals happened to be small; the bound does not.
+    pub(crate) fn variance_bound_at(&self, p: [f64; 2]) -> f64 {
+        // Wilson–Hilferty: χ²_q(ν) ≈ ν (1 − 2/(9ν) + z_q √(2/(9ν)))³, z₀.₀₅ = −1.645.
+        let a = 2.0 / (9.0 * self.dof);
+        let root = (1.0 - a - 1.645 * a.sqrt()).max(0.05);
+        self.variance_at(p) / (root * root * root)
     }
 
     /// Variance (px²) of the curve's position across itself at `p`.
@@ -1503,6 +1516,30 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn variance_bound_is_the_chi_square_upper_bound() {
+        // Twelve samples about a line, a line fitted: 10 degrees of freedom, and the 95 % upper
+        // bound of a variance is ν/χ²₀.₀₅(ν) = 10/3.9403 = 2.538 times the estimate.
+        let jitter = [
+            0.05, -0.03, 0.04, -0.06, 0.02, -0.01, 0.05, -0.04, 0.03, -0.05, 0.01, -0.02,
+        ];
+        let pts: Vec<[f64; 2]> = jitter
+            .iter()
+            .enumerate()
+            .map(|(i, j)| [i as f64, 0.3 * i as f64 + 2.0 + j])
+            .collect();
+        let line = Curve::Line(fit_line_tls(&pts, None).unwrap());
+        let st = PositionStats::new(pts.iter(), &line, EdgeModel::Line).unwrap();
+        for p in [[5.5, 3.65], [20.0, 8.0]] {
+            let (v, b) = (st.variance_at(p), st.variance_bound_at(p));
+            assert!(v > 0.0 && (b / v - 2.538).abs() < 0.05, "{v} {b}");
+        }
+        // Fewer degrees of freedom, a wider bound.
+        let few = PositionStats::new(pts[..5].iter(), &line, EdgeModel::Line).unwrap();
+        let p = [2.0, 2.6];
+        assert!(few.variance_bound_at(p) / few.variance_at(p) > 5.0);
+    }
 
     fn close(p: [f64; 2], q: [f64; 2], tol: f64) -> bool {
         (p[0] - q[0]).hypot(p[1] - q[1]) <= tol
