@@ -285,8 +285,8 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
                 if local.status == Status::Failed {
                     let predicted = neighbour_prediction(&corners, b, (row, col));
-                    let starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
-                    let confirmed = starts.into_iter().find_map(|[x, y]| {
+                    let mut starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
+                    let confirmed = starts.find_map(|[x, y]| {
                         let start = Corner { x, y, ..corners[i] };
                         let again = refine_corner(image, &start, row, col, reach, &params.refine);
                         (again.status == Status::Converged
