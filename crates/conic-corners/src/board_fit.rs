@@ -524,6 +524,13 @@ struct Walk {
 
 /// Consecutive missed scanlines that end an open walk.
 const MAX_MISSES: usize = 6;
+/// How far (a fraction of the profile window's half-width) a walk's first samples may lie from
+/// the line through the pixel-level corners, before the walk has samples of its own to predict
+/// from. A print's dot gain moves every edge up to a few pixels off that line (its two
+/// polarities lie on either side), and the pixel-level corners are off by up to a pixel: at
+/// 0.35 the walks lost whole squares under a gain of 1.7 px per side and the offset between the
+/// polarities went unmeasured.
+const FIRST_SAMPLES_REACH: f64 = 0.5;
 /// Samples behind each prediction.
 const PREDICT_SAMPLES: usize = 16;
 
@@ -608,7 +615,12 @@ fn walk_edge(
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
             let a = s.fit.amplitude * along_scan.signum();
             let off = dist(s.point, q);
-            let near = off <= if n < 6 { 0.35 * hw as f64 } else { tolerance };
+            let near = off
+                <= if n < 6 {
+                    FIRST_SAMPLES_REACH * hw as f64
+                } else {
+                    tolerance
+                };
             let same = polarity == 0.0 || a.signum() == polarity;
             let similar = n < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
             (near && same && similar).then_some((s, a))

@@ -305,16 +305,21 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     (Status::Failed, board) => (true, board.unwrap_or(local)),
                 };
                 // When nothing else places the corner, the curves' intersection beats the
-                // unrefined pixel position.
+                // unrefined pixel position, if within the refiner's reach of it.
                 let curves = |c: DetectedCorner| match too_far {
-                    Some(([x, y], sigma)) if c.status == Status::Failed => DetectedCorner {
-                        x,
-                        y,
-                        status: Status::Fallback,
-                        path: Path::Board,
-                        sigma: Some(sigma),
-                        ..c
-                    },
+                    Some(([x, y], sigma))
+                        if c.status == Status::Failed
+                            && (x - pixel.x).hypot(y - pixel.y) <= params.refine.max_shift =>
+                    {
+                        DetectedCorner {
+                            x,
+                            y,
+                            status: Status::Fallback,
+                            path: Path::Board,
+                            sigma: Some(sigma),
+                            ..c
+                        }
+                    }
                     _ => c,
                 };
                 let Some(g) = params.gradient.as_ref().filter(|_| weak) else {

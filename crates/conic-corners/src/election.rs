@@ -389,27 +389,29 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// Candidates within 7 px of the border (the template would leave the image) are dropped.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
     let fine = elect_at_one_scale(image, candidates, params);
-    let Some(stride) = coarse_stride(&fine) else {
-        return fine;
-    };
-    let Some(coarse) = box_downsample(image, stride).filter(|c| c.width().min(c.height()) >= 16)
-    else {
-        return fine;
-    };
-    let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
-    let mut all: Vec<Corner> = elect_at_one_scale(&coarse, &coarse_candidates, params)
-        .into_iter()
-        .filter_map(|c| {
-            let (x, y) = saddle_point(&coarse, c.x as usize, c.y as usize)?;
-            let s = stride as f64;
-            let offset = 0.5 * (s - 1.0);
-            Some(Corner {
-                x: s * x + offset,
-                y: s * y + offset,
-                ..c
+    let (stride, mut all) = match coarse_stride(&fine) {
+        Some(stride) => (stride, elect_coarse(image, stride, stride, params)),
+        // Too few fine corners to measure the grid step: every junction can fail the fine tests
+        // at once (a print's dot gain joins the dark squares by a bridge a few pixels wide, and
+        // the centre test rejects them all). The coarse scale that elects the most corners is
+        // taken, the finest on a tie.
+        None if fine.len() < MIN_FINE_CORNERS => FALLBACK_STRIDES
+            .iter()
+            .map(|&stride| {
+                (
+                    stride,
+                    elect_coarse(image, stride, FINEST_SADDLE_STRIDE, params),
+                )
             })
-        })
-        .collect();
+            .fold((1, Vec::new()), |best, next| {
+                if next.1.len() > best.1.len() {
+                    next
+                } else {
+                    best
+                }
+            }),
+        None => return fine,
+    };
     // A corner found at both scales keeps its fine position (better than a coarse pixel); the
     // coarse pass only adds the corners the fine one rejected.
     let radius = stride as f64 * COARSE_MERGE_PIXELS;
@@ -419,6 +421,73 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.y.total_cmp(&b.y)));
     deduplicate(all, params.min_distance)
 }
+
+/// Fewer fine corners than this leave the grid step unmeasured.
+const MIN_FINE_CORNERS: usize = 4;
+/// Strides of the coarse passes tried when the fine pass elects too few corners.
+const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
+
+/// Election on the image box-downsampled by `stride`, each corner at its saddle point mapped
+/// back to full-resolution coordinates; empty if the downsampled image is under 16 px.
+///
+/// Each corner then moves to the saddle point near it at half the stride, and so on down to the
+/// stride `finest` (a scale where no saddle is found leaves the position as it was). Where the
+/// fine pass elected nothing, these are the only corners, and a coarse pixel (up to 8 px) is too
+/// rough a start for the edge walks; where the fine pass worked, the coarse corners only fill
+/// its gaps and keep their coarse saddle point (`finest = stride`).
+fn elect_coarse(
+    image: &GrayImage,
+    stride: usize,
+    finest: usize,
+    params: &ElectionParams,
+) -> Vec<Corner> {
+    let Some(coarse) = box_downsample(image, stride).filter(|c| c.width().min(c.height()) >= 16)
+    else {
+        return Vec::new();
+    };
+    let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
+    // Full-resolution coordinates of the saddle near the pixel of `img` (downsampled by `s`)
+    // that holds `(x, y)`.
+    let saddle_at = |img: &GrayImage, s: usize, (x, y): (f64, f64)| {
+        let (sf, offset) = (s as f64, 0.5 * (s as f64 - 1.0));
+        let (px, py) = (((x - offset) / sf).round(), ((y - offset) / sf).round());
+        if px < 0.0 || py < 0.0 {
+            return None;
+        }
+        let (u, v) = saddle_point(img, px as usize, py as usize)?;
+        Some((sf * u + offset, sf * v + offset))
+    };
+    let mut corners: Vec<Corner> = elect_at_one_scale(&coarse, &coarse_candidates, params)
+        .into_iter()
+        .filter_map(|c| {
+            // `c` is in coarse pixels.
+            let (sf, offset) = (stride as f64, 0.5 * (stride as f64 - 1.0));
+            let (x, y) = saddle_at(&coarse, stride, (sf * c.x + offset, sf * c.y + offset))?;
+            Some(Corner { x, y, ..c })
+        })
+        .collect();
+    let mut s = stride / 2;
+    while s >= finest.max(1) {
+        let finer = if s == 1 {
+            None
+        } else {
+            box_downsample(image, s)
+        };
+        let img = finer.as_ref().unwrap_or(image);
+        for c in &mut corners {
+            if let Some((x, y)) = saddle_at(img, s, (c.x, c.y)) {
+                (c.x, c.y) = (x, y);
+            }
+        }
+        s /= 2;
+    }
+    corners
+}
+
+/// The finest scale (stride) at which [`elect_coarse`] moves the corners of a coarse-only election
+/// to a saddle point. At full resolution a junction whose dark squares a print's dot gain has
+/// joined by a bridge of a few pixels is a valley, not a saddle.
+const FINEST_SADDLE_STRIDE: usize = 2;
 
 /// Coarse pixels within which a coarse-scale corner and a fine-scale one are the same corner.
 const COARSE_MERGE_PIXELS: f64 = 2.5;
