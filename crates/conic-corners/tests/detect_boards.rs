@@ -377,6 +377,57 @@ fn dot_gain_bridges_do_not_hide_the_board() {
     }
 }
 
+/// Detection under a print's dot gain, as a table (not a pass/fail test):
+/// `cargo test --release -p conic-corners --test detect_boards dot_gain_report -- --ignored
+/// --nocapture`. Six random poses per cell, 9×9 corners, squares of 20 mm (about 90–140 px),
+/// blur 1 px, noise 1 %. A detection is "off" when it lies more than 1.5 px from every true
+/// corner, visible or not; "found" counts the visible corners with a detection within 1.5 px,
+/// and the RMS is over those.
+#[test]
+#[ignore]
+fn dot_gain_report() {
+    let surfaces = [
+        ("flat", Surface::Flat),
+        ("cylinder 60", Surface::Cylinder { radius_mm: 60.0 }),
+        ("S 80", Surface::SShape { radius_mm: 80.0 }),
+    ];
+    println!("| gain mm | surface | visible | found | off | no board | RMS px |");
+    println!("|---|---|---|---|---|---|---|");
+    for gain in [0.0, 0.1, 0.2, 0.3] {
+        for (name, surface) in surfaces {
+            let (mut visible, mut found, mut off, mut none, mut sq) = (0, 0, 0, 0, 0.0);
+            for seed in 0..6u64 {
+                let t = BoardScene {
+                    dot_gain_mm: gain,
+                    ..template()
+                };
+                let s = random_board_scene(&mut ChaCha8Rng::seed_from_u64(100 + seed), surface, &t);
+                let r = s.render(seed).expect("valid scene");
+                let det = detect(&r.image, &DetectParams::default());
+                none += usize::from(det.boards.is_empty());
+                let nearest = |x: f64, y: f64, visible_only: bool| {
+                    r.corners
+                        .iter()
+                        .filter(|t| t.x.is_finite() && (t.visible || !visible_only))
+                        .map(|t| (t.x - x).hypot(t.y - y))
+                        .fold(f64::INFINITY, f64::min)
+                };
+                visible += r.corners.iter().filter(|t| t.visible).count();
+                for c in det.boards.iter().flat_map(|b| &b.corners) {
+                    off += usize::from(nearest(c.x, c.y, false) > 1.5);
+                    let d = nearest(c.x, c.y, true);
+                    if d <= 1.5 {
+                        found += 1;
+                        sq += d * d;
+                    }
+                }
+            }
+            let rms = (sq / found.max(1) as f64).sqrt();
+            println!("| {gain} | {name} | {visible} | {found} | {off} | {none} | {rms:.4} |");
+        }
+    }
+}
+
 /// Grid completion restores the corners the election rejects: with a nearly strict score rule
 /// (`t_correlation` 0.015) the election drops about a fifth of the corners of a bent board with
 /// dots; completion brings them back at their labels, and only them.
