@@ -422,8 +422,9 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     deduplicate(all, params.min_distance)
 }
 
-/// Fewer fine corners than this leave the grid step unmeasured.
-const MIN_FINE_CORNERS: usize = 4;
+/// With fewer fine corners than a 3 × 3 patch of a board, and no grid step measured from them,
+/// the coarse passes of [`FALLBACK_STRIDES`] are tried.
+const MIN_FINE_CORNERS: usize = 9;
 /// Strides of the coarse passes tried when the fine pass elects too few corners.
 const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
 
