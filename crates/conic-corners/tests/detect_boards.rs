@@ -377,30 +377,57 @@ fn dot_gain_bridges_do_not_hide_the_board() {
     }
 }
 
-/// Detection under a print's dot gain, as a table (not a pass/fail test):
-/// `cargo test --release -p conic-corners --test detect_boards dot_gain_report -- --ignored
-/// --nocapture`. Six random poses per cell, 9×9 corners, squares of 20 mm (about 90–140 px),
-/// blur 1 px, noise 1 %. A detection is "off" when it lies more than 1.5 px from every true
-/// corner, visible or not; "found" counts the visible corners with a detection within 1.5 px,
-/// and the RMS is over those.
+/// Detection across imaging conditions, as a table (not a pass/fail test):
+/// `cargo test --release -p conic-corners --test detect_boards robustness_report -- --ignored
+/// --nocapture`. Six random poses per cell, 9×9 corners on 20 mm squares (about 90–140 px)
+/// unless the condition says otherwise, blur 1 px, noise 1 %. A detection is "off" when it lies
+/// more than 1.5 px from every true corner, visible or not; "found" counts the visible corners
+/// with a detection within 1.5 px, and the RMS is over those.
 #[test]
 #[ignore]
-fn dot_gain_report() {
+fn robustness_report() {
+    type Edit = fn(&mut BoardScene);
+    let conditions: [(&str, Edit); 15] = [
+        ("baseline", |_| ()),
+        ("dot gain 0.1 mm", |t| t.dot_gain_mm = 0.1),
+        ("dot gain 0.2 mm", |t| t.dot_gain_mm = 0.2),
+        ("dot gain 0.3 mm", |t| t.dot_gain_mm = 0.3),
+        ("blur 2.5 px", |t| t.blur = 2.5),
+        ("blur 4 px", |t| t.blur = 4.0),
+        ("noise 5 %", |t| t.noise = 0.05),
+        ("noise 10 %", |t| t.noise = 0.10),
+        ("contrast 0.4–0.6", |t| (t.black, t.white) = (0.4, 0.6)),
+        ("dark (0.02–0.15)", |t| {
+            (t.black, t.white, t.background) = (0.02, 0.15, 0.08)
+        }),
+        ("uneven light", |t| t.lighting_gradient = [0.6, -0.5]),
+        ("squares 3.5 mm", |t| (t.square_mm, t.cols) = (3.5, 11)),
+        ("15×21 corners, 8 mm", |t| {
+            (t.rows, t.cols, t.square_mm) = (15, 21, 8.0)
+        }),
+        ("radial distortion k₁ −0.25", |t| t.camera.k1 = -0.25),
+        ("bar across the board", |t| {
+            t.occluders = vec![Occluder {
+                from: [700.0, 0.0],
+                to: [1200.0, 1200.0],
+                width: 40.0,
+                intensity: 0.3,
+            }]
+        }),
+    ];
     let surfaces = [
         ("flat", Surface::Flat),
         ("cylinder 60", Surface::Cylinder { radius_mm: 60.0 }),
         ("S 80", Surface::SShape { radius_mm: 80.0 }),
     ];
-    println!("| gain mm | surface | visible | found | off | no board | RMS px |");
+    println!("| condition | surface | visible | found | off | no board | RMS px |");
     println!("|---|---|---|---|---|---|---|");
-    for gain in [0.0, 0.1, 0.2, 0.3] {
+    for (condition, edit) in conditions {
         for (name, surface) in surfaces {
             let (mut visible, mut found, mut off, mut none, mut sq) = (0, 0, 0, 0, 0.0);
             for seed in 0..6u64 {
-                let t = BoardScene {
-                    dot_gain_mm: gain,
-                    ..template()
-                };
+                let mut t = template();
+                edit(&mut t);
                 let s = random_board_scene(&mut ChaCha8Rng::seed_from_u64(100 + seed), surface, &t);
                 let r = s.render(seed).expect("valid scene");
                 let det = detect(&r.image, &DetectParams::default());
@@ -423,7 +450,7 @@ fn dot_gain_report() {
                 }
             }
             let rms = (sq / found.max(1) as f64).sqrt();
-            println!("| {gain} | {name} | {visible} | {found} | {off} | {none} | {rms:.4} |");
+            println!("| {condition} | {name} | {visible} | {found} | {off} | {none} | {rms:.4} |");
         }
     }
 }
