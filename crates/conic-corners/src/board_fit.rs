@@ -222,12 +222,36 @@ pub struct BoardFit {
     pub blur: f64,
 }
 
+impl BoardFit {
+    /// The print's offset (px) between the two polarities of a grid line: the median magnitude
+    /// over the lines where it was significant (about twice the dot gain), 0 on a clean print.
+    /// A corner placed from one side of its junction only is off by about half of it.
+    pub fn polarity_offset(&self) -> f64 {
+        let mut offsets: Vec<f64> = self
+            .lines
+            .iter()
+            .map(|l| l.polarity_offset.abs())
+            .filter(|o| *o > 0.0 && o.is_finite())
+            .collect();
+        if offsets.is_empty() {
+            return 0.0;
+        }
+        median_mad_in_place(&mut offsets).0
+    }
+}
+
 /// Localizes every corner of `board` by board-wide curve fitting (see the module docs). Returns
 /// one [`FittedCorner`] per `board.corners` entry, in the same order; corners that cannot be fitted
 /// keep their input position with [`Path::Local`]. Never panics and never returns a non-finite
 /// board-wide position.
 pub fn fit_board(image: &GrayImage, board: &Board, params: &BoardFitParams) -> Vec<FittedCorner> {
-    run(image, board, params, false).corners
+    fit_board_full(image, board, params).corners
+}
+
+/// [`fit_board`], also returning the lines (samples and pieces, each piece fitted only where a
+/// corner needs it) and the blur.
+pub fn fit_board_full(image: &GrayImage, board: &Board, params: &BoardFitParams) -> BoardFit {
+    run(image, board, params, false)
 }
 
 /// [`fit_board`], also returning every line's samples and fitted pieces (for drawing; each piece
@@ -1284,6 +1308,26 @@ mod tests {
         let (e, n) = rms(st.board.iter().map(|b| b.1));
         assert!(n >= 40, "{n} board, {} local", st.local);
         assert!(e < 0.04, "S RMS {e}");
+    }
+
+    #[test]
+    fn board_polarity_offset_is_the_median_of_the_measured_lines() {
+        let line = |polarity_offset: f64| FittedLine {
+            kind: LineKind::Row,
+            index: 0,
+            samples: Vec::new(),
+            segments: Vec::new(),
+            polarity_offset,
+        };
+        let fit = |offsets: &[f64]| BoardFit {
+            corners: Vec::new(),
+            lines: offsets.iter().map(|&o| line(o)).collect(),
+            blur: 1.0,
+        };
+        // Unmeasured lines (0) do not count, and the sign (which polarity leads) does not matter.
+        assert_eq!(fit(&[0.0, 2.0, -3.0, 2.5, 0.0]).polarity_offset(), 2.5);
+        assert_eq!(fit(&[0.0, 0.0]).polarity_offset(), 0.0);
+        assert_eq!(fit(&[]).polarity_offset(), 0.0);
     }
 
     #[test]

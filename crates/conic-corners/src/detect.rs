@@ -3,7 +3,7 @@
 //!
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
-use crate::board_fit::{fit_board, BoardFitParams, Path};
+use crate::board_fit::{fit_board_full, BoardFitParams, Path};
 use crate::completion::{complete_boards, CompletionParams};
 use crate::connectivity::{
     connect, label_with, Board as LabelledBoard, ConnectivityParams, LabelParams,
@@ -232,8 +232,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     .map(|(&i, &(row, col))| pixel_corner(&corners[i], row, col))
                     .collect(),
             };
-            fit_board(image, &pixel, &params.board_fit)
+            fit_board_full(image, &pixel, &params.board_fit)
         });
+        let half_offset = 0.5 * fitted.as_ref().map_or(0.0, |f| f.polarity_offset());
+        let fitted = fitted.map(|f| f.corners);
         // The board's typical σ: a corner far above it is an outlier of its own board, whatever
         // the image's scale, blur and noise.
         let sigma_limit = fitted.as_ref().map_or(f64::INFINITY, |f| {
@@ -340,6 +342,21 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     }
                     (gc, _) => gc.unwrap_or(last),
                 })
+            })
+            .collect();
+        // A local answer from one side of its junction cannot see the offset between the
+        // polarities that a print's dot gain puts into every edge, and is off by about half of
+        // it: its σ says so.
+        let refined = refined
+            .into_iter()
+            .map(|c| match c.sigma {
+                Some(s) if c.path == Path::Local && c.status == Status::Fallback => {
+                    DetectedCorner {
+                        sigma: Some(s.hypot(half_offset)),
+                        ..c
+                    }
+                }
+                _ => c,
             })
             .collect();
         refine_ms += ms(t);
