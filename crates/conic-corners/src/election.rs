@@ -387,6 +387,11 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// best one stays). Returns corners strongest first, at their integer pixel positions; `angles` are the
 /// orientations of the winning template (multiples of 2.5°, wrapped to `[0, π)`).
 /// Candidates within 7 px of the border (the template would leave the image) are dropped.
+///
+/// A coarse pass on the box-downsampled image adds the corners the fine tests reject on large
+/// squares (its stride from the grid step of the fine corners); when the fine pass elects too
+/// few corners to give a step (every junction bridged by a print's dot gain), passes at strides
+/// 2, 4 and 8 are tried and the one electing the most corners is kept.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
     let fine = elect_at_one_scale(image, candidates, params);
     let (stride, mut all) = match coarse_stride(&fine) {
@@ -432,7 +437,7 @@ const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
 /// back to full-resolution coordinates; empty if the downsampled image is under 16 px.
 ///
 /// Each corner then moves to the saddle point near it at half the stride, and so on down to the
-/// stride `finest` (a scale where no saddle is found leaves the position as it was). Where the
+/// stride `finest` (where a scale shows no saddle, to the centre of that scale's pixel). Where the
 /// fine pass elected nothing, these are the only corners, and a coarse pixel (up to 8 px) is too
 /// rough a start for the edge walks; where the fine pass worked, the coarse corners only fill
 /// its gaps and keep their coarse saddle point (`finest = stride`).
