@@ -48,8 +48,8 @@
 
 use crate::detect::Board;
 use crate::edge_sampling::{
-    blur_sigma_from_widths, logistic_width, next_scanline_point, sample_edge_bounded,
-    sample_edge_with, Axis, ScanBounds, SigmoidParams,
+    blur_sigma_from_widths, crossing_offset, logistic_width, next_scanline_point,
+    profile_half_width, sample_edge_bounded, sample_edge_with, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
     corner_covariance, edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve,
@@ -519,8 +519,7 @@ impl WalkConfig {
     /// Half-width (pixels) of the profile window for an edge of direction `d`: about ±3σ across
     /// the edge, stretched by `1/|cos|` on an oblique scanline.
     fn half_width(&self, d: [f64; 2]) -> usize {
-        let along = d[0].abs().max(d[1].abs()).max(0.5);
-        ((3.0 * self.sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
+        profile_half_width(self.sigma, d)
     }
 
     /// Fewest pixels a window cut short by a crossing edge keeps on that side: `2σ + 1` across the
@@ -605,14 +604,7 @@ fn walk_edge(
         let (q_scan, reach) = (if steep { q[0] } else { q[1] }, hw as f64 + cfg.guard);
         let mut clash = false;
         for &(c, o) in w.clash.iter().flatten() {
-            let gap = if steep {
-                let y0 = q[1].round();
-                (o[1].abs() > 1e-9).then(|| c[0] + (y0 - c[1]) * o[0] / o[1] - q[0])
-            } else {
-                let x0 = q[0].round();
-                (o[0].abs() > 1e-9).then(|| c[1] + (x0 - c[0]) * o[1] / o[0] - q[1])
-            };
-            match gap {
+            match crossing_offset(q, steep, c, o) {
                 Some(g) if g.abs() <= reach => {
                     clash = true;
                     if g > 0.0 {

@@ -973,6 +973,27 @@ pub fn next_scanline_point(anchor: [f64; 2], d: [f64; 2], stride: usize) -> [f64
     }
 }
 
+/// Half-width (pixels) of the profile window for an edge of direction `d` (any length) under a
+/// blur of `sigma` px: about ±3σ across the edge, stretched by `1/|cos|` on an oblique scanline.
+pub(crate) fn profile_half_width(sigma: f64, d: [f64; 2]) -> usize {
+    let along = d[0].abs().max(d[1].abs()).max(0.5);
+    ((3.0 * sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
+}
+
+/// Where the straight line through `point` with direction `dir` crosses the scanline of `q` (the
+/// row `round(q.y)` if `steep`, else the column `round(q.x)`), as a signed offset from `q` along
+/// that scanline; `None` if the line runs along it.
+pub(crate) fn crossing_offset(
+    q: [f64; 2],
+    steep: bool,
+    point: [f64; 2],
+    dir: [f64; 2],
+) -> Option<f64> {
+    let (a, b) = if steep { (0, 1) } else { (1, 0) };
+    let fixed = round(q[b]);
+    (dir[b].abs() > 1e-9).then(|| point[a] + (fixed - point[b]) * dir[a] / dir[b] - q[a])
+}
+
 /// Logistic width `c` (px) across an edge blurred by a Gaussian of `sigma` px and area-sampled by
 /// pixels: `√(σ² + 1/12) / K`, `K =` [`LOGISTIC_TO_GAUSSIAN`] (the inverse of
 /// [`blur_sigma_from_widths`]).

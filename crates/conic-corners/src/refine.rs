@@ -24,8 +24,8 @@
 //! centre of the top-left pixel.
 
 use crate::edge_sampling::{
-    blur_sigma_from_widths, logistic_width, next_scanline_point, round, sample_edge_predicted,
-    sample_edge_with, Axis, EdgeSample, SigmoidParams,
+    blur_sigma_from_widths, crossing_offset, logistic_width, next_scanline_point,
+    profile_half_width, sample_edge_predicted, sample_edge_with, Axis, EdgeSample, SigmoidParams,
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
@@ -357,8 +357,7 @@ impl WalkConfig {
     /// Half-width (pixels) of the profile window for an edge of direction `d`: the transition spans
     /// about ±3σ across the edge, stretched by `1/|cos|` on a scanline oblique to the normal.
     fn half_width(&self, d: [f64; 2]) -> usize {
-        let along = d[0].abs().max(d[1].abs()).max(0.5);
-        ((3.0 * self.sigma + 2.5) / along).ceil().clamp(4.0, 31.0) as usize
+        profile_half_width(self.sigma, d)
     }
 }
 
@@ -700,16 +699,8 @@ fn walk_ray(
         }
         // Where the other edge (a straight line through the corner) crosses this scanline.
         let hw = cfg.half_width(d);
-        let clash = if steep {
-            let y0 = round(q[1]);
-            (other[1].abs() > 1e-9)
-                .then(|| (corner[0] + (y0 - corner[1]) * other[0] / other[1] - q[0]).abs())
-        } else {
-            let x0 = round(q[0]);
-            (other[0].abs() > 1e-9)
-                .then(|| (corner[1] + (x0 - corner[0]) * other[1] / other[0] - q[1]).abs())
-        };
-        if clash.is_some_and(|c| c <= hw as f64 + guard) {
+        let clash = crossing_offset(q, steep, corner, other);
+        if clash.is_some_and(|c| c.abs() <= hw as f64 + guard) {
             continue;
         }
         let fixed = cfg.normal_width.map(|c| {
