@@ -730,6 +730,7 @@ pub fn sample_edge_with(
     fixed_width: Option<f32>,
     params: &SigmoidParams,
 ) -> Option<EdgeSample> {
+    let scan = Scan::default();
     sample_edge_impl(
         image,
         point,
@@ -737,8 +738,7 @@ pub fn sample_edge_with(
         half_width,
         fixed_width,
         params,
-        false,
-        None,
+        scan,
     )
 }
 
@@ -759,6 +759,10 @@ pub fn sample_edge_predicted(
     fixed_width: Option<f32>,
     params: &SigmoidParams,
 ) -> Option<EdgeSample> {
+    let scan = Scan {
+        predicted: true,
+        bounds: None,
+    };
     sample_edge_impl(
         image,
         point,
@@ -766,8 +770,7 @@ pub fn sample_edge_predicted(
         half_width,
         fixed_width,
         params,
-        true,
-        None,
+        scan,
     )
 }
 
@@ -799,6 +802,10 @@ pub fn sample_edge_bounded(
     fixed_width: Option<f32>,
     params: &SigmoidParams,
 ) -> Option<EdgeSample> {
+    let scan = Scan {
+        predicted: false,
+        bounds: Some(bounds),
+    };
     sample_edge_impl(
         image,
         point,
@@ -806,14 +813,20 @@ pub fn sample_edge_bounded(
         half_width,
         fixed_width,
         params,
-        false,
-        Some(bounds),
+        scan,
     )
 }
 
-/// [`sample_edge_with`], the first fit started at the predicted crossing if `predicted`, the
-/// windows cut to `bounds` if given.
-#[allow(clippy::too_many_arguments)]
+/// How [`sample_edge_impl`] differs from [`sample_edge_with`].
+#[derive(Clone, Copy, Debug, Default)]
+struct Scan {
+    /// The first fit starts at the predicted crossing ([`sample_edge_predicted`]).
+    predicted: bool,
+    /// The windows are cut to these limits ([`sample_edge_bounded`]).
+    bounds: Option<ScanBounds>,
+}
+
+/// [`sample_edge_with`], changed as `scan` says.
 fn sample_edge_impl(
     image: &GrayImage,
     point: [f64; 2],
@@ -821,8 +834,7 @@ fn sample_edge_impl(
     half_width: usize,
     fixed_width: Option<f32>,
     params: &SigmoidParams,
-    predicted: bool,
-    bounds: Option<ScanBounds>,
+    Scan { predicted, bounds }: Scan,
 ) -> Option<EdgeSample> {
     if point.iter().chain(&direction).any(|v| !v.is_finite())
         || !(3..=MAX_HALF_WIDTH).contains(&half_width)
