@@ -452,11 +452,10 @@ fn elect_coarse(
         return Vec::new();
     };
     let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
-    // Full-resolution coordinates of the saddle near the pixel of `img` (downsampled by `s`)
-    // that holds `(x, y)`.
-    let saddle_at = |img: &GrayImage, s: usize, (x, y): (f64, f64)| {
+    // Full-resolution coordinates of the saddle near pixel `(px, py)` of `img`, the image
+    // downsampled by `s` (whose pixel (u, v) covers the full-resolution centre s·(u, v) + (s−1)/2).
+    let saddle_at = |img: &GrayImage, s: usize, px: f64, py: f64| {
         let (sf, offset) = (s as f64, 0.5 * (s as f64 - 1.0));
-        let (px, py) = (((x - offset) / sf).round(), ((y - offset) / sf).round());
         if px < 0.0 || py < 0.0 {
             return None;
         }
@@ -466,9 +465,7 @@ fn elect_coarse(
     let mut corners: Vec<Corner> = elect_at_one_scale(&coarse, &coarse_candidates, params)
         .into_iter()
         .filter_map(|c| {
-            // `c` is in coarse pixels.
-            let (sf, offset) = (stride as f64, 0.5 * (stride as f64 - 1.0));
-            let (x, y) = saddle_at(&coarse, stride, (sf * c.x + offset, sf * c.y + offset))?;
+            let (x, y) = saddle_at(&coarse, stride, c.x, c.y)?;
             Some(Corner { x, y, ..c })
         })
         .collect();
@@ -480,8 +477,10 @@ fn elect_coarse(
             box_downsample(image, s)
         };
         let img = finer.as_ref().unwrap_or(image);
+        let (sf, offset) = (s as f64, 0.5 * (s as f64 - 1.0));
         for c in &mut corners {
-            if let Some((x, y)) = saddle_at(img, s, (c.x, c.y)) {
+            let (px, py) = (((c.x - offset) / sf).round(), ((c.y - offset) / sf).round());
+            if let Some((x, y)) = saddle_at(img, s, px, py) {
                 (c.x, c.y) = (x, y);
             }
         }
