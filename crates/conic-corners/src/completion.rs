@@ -454,6 +454,8 @@ fn sliver_starts() -> impl Iterator<Item = [f64; 2]> {
 /// How far (px) the edge-walk placement of a sliver's corner may move when started from itself
 /// (the gradient estimate's own default limit).
 const SLIVER_CONFIRM_SHIFT: f64 = 1.5;
+/// The refiner's reaches of check (c), in grid steps, longest first.
+const REACHES: [f64; 4] = [1.0, 0.5, 0.3, 0.15];
 /// The scales of a sliver's side of the frame tried at a boundary site.
 const SLIVER_SCALES: [f64; 2] = [0.5, 0.25];
 
@@ -619,34 +621,35 @@ fn complete_one(
                 // Blurred or foreshortened junctions (the outer ring of a bent board) leave the
                 // edge walks nothing to fit; the gradient estimate, which needs only the
                 // junction, is the last resort.
-                let place = |start: P, max_shift: f64, edges_only: bool| {
-                    let refined = [1.0, 0.5, 0.3, 0.15].into_iter().find_map(|k| {
-                        let refine = RefineParams {
-                            reach: (k * step).clamp(5.0, params.refine.reach.max(5.0)),
-                            max_shift,
-                            ..params.refine.clone()
-                        };
-                        let r = refine_one(image, start, &refine);
-                        (r.status != Status::Failed).then_some([r.x, r.y])
-                    });
-                    refined.or_else(|| {
-                        if edges_only {
-                            return None;
-                        }
-                        let g = GradientParams {
-                            max_shift,
-                            ..params.gradient.clone()?
-                        };
-                        refine_gradient(image, start, &g).map(|c| c.point)
-                    })
+                let refine_at = |k: f64, max_shift: f64| RefineParams {
+                    reach: (k * step).clamp(5.0, params.refine.reach.max(5.0)),
+                    max_shift,
+                    ..params.refine.clone()
                 };
-                let Some(z) = place(q, params.max_offset * step, false) else {
+                let refined = REACHES.into_iter().find_map(|k| {
+                    let r = refine_one(image, q, &refine_at(k, params.max_offset * step));
+                    (r.status != Status::Failed).then_some([r.x, r.y])
+                });
+                let last_resort = || {
+                    let g = GradientParams {
+                        max_shift: params.max_offset * step,
+                        ..params.gradient.clone()?
+                    };
+                    refine_gradient(image, q, &g).map(|c| c.point)
+                };
+                let Some(z) = refined.or_else(last_resort) else {
                     continue;
                 };
                 // A sliver's junction is barely resolved, and the gradient estimate is off by
                 // pixels there (measured on renders past the truth's visibility limit): the edge
-                // walks must confirm the corner, started from it.
-                if on_sliver && place(z, SLIVER_CONFIRM_SHIFT, true).is_none() {
+                // walks, started from the corner, must come back to it.
+                let confirmed = || {
+                    REACHES.into_iter().any(|k| {
+                        refine_one(image, z, &refine_at(k, SLIVER_CONFIRM_SHIFT)).status
+                            != Status::Failed
+                    })
+                };
+                if on_sliver && !confirmed() {
                     continue;
                 }
                 if norm(sub(z, p)) > params.max_offset * step {
