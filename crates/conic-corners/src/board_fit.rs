@@ -39,7 +39,11 @@
 //! distances over `n − k`), `Φ` the design matrix of the samples in the piece's principal frame
 //! with the polynomial basis of the selected model (`1, u` for a line, `1, u, u²` for a parabola,
 //! `1, u, …, u⁴` for a conic, whose two extra coefficients act like `u³`, `u⁴` along a nearly
-//! straight edge), `u` the corner's position along the piece. Shifting the two curves by `δ₁`,
+//! straight edge), `u` the corner's position along the piece. A piece that ends before the
+//! corner is extrapolated there, where its position depends on the model more than on the
+//! samples' noise: the squared gap at the corner between its curve and the next simpler model's
+//! fit to the same samples (parabola for a conic, line for a parabola) is added as a model
+//! variance. Shifting the two curves by `δ₁`,
 //! `δ₂` along their unit normals `n₁`, `n₂` moves the intersection by `N⁻¹ δ` with `N = [n₁ᵀ; n₂ᵀ]`,
 //! so the corner's covariance is `N⁻¹ diag(v₁, v₂) N⁻ᵀ + σ_sys² I`, with `σ_sys`
 //! ([`BoardFitParams::systematic_sigma`]) for the model error of the sigmoid and pixel sampling.
@@ -52,8 +56,8 @@ use crate::edge_sampling::{
     profile_half_width, sample_edge_bounded, sample_edge_with, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
-    corner_covariance, edge_jump, fit_edge_curve_with, nearest_intersection, BranchGuard, Curve,
-    EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
+    corner_covariance, edge_jump, fit_edge_curve_upto, fit_edge_curve_with, nearest_intersection,
+    BranchGuard, Curve, EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::{median_mad_in_place, segment_chain, SegmentationParams};
 use crate::GrayImage;
@@ -990,6 +994,8 @@ fn robust_fit(
         return None;
     }
     let stats = PositionStats::new(kept.iter().map(|&i| &pts[i]), &f.curve, f.model)?;
+    scratch.clear();
+    scratch.extend(kept.iter().map(|&i| pts[i]));
     Some((f.curve, f.model, f.rms, stats, kept.len()))
 }
 
@@ -1006,6 +1012,39 @@ fn near_corner(p: [f64; 2]) -> BranchGuard {
     BranchGuard::Near {
         point: p,
         clearance: BRANCH_CLEARANCE_PX,
+    }
+}
+
+/// The distance (px) at `p` between `curve` (of `model`, fitted to `points`) and the fit of the
+/// next simpler model to the same points (0 for a line, or where that fit fails): measured from
+/// the point of `curve` nearest `p`, whose normal is taken by central differences of its
+/// (approximately Euclidean) distance function.
+fn model_gap(curve: &Curve, model: EdgeModel, points: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    let simpler = match model {
+        EdgeModel::Line => return 0.0,
+        EdgeModel::Parabola => EdgeModel::Line,
+        EdgeModel::Conic => EdgeModel::Parabola,
+    };
+    let Some(alt) = fit_edge_curve_upto(points, None, near_corner(p), simpler) else {
+        return 0.0;
+    };
+    const H: f64 = 0.5;
+    let d = |x: f64, y: f64| curve.distance(x, y);
+    let g = [
+        (d(p[0] + H, p[1]) - d(p[0] - H, p[1])) / (2.0 * H),
+        (d(p[0], p[1] + H) - d(p[0], p[1] - H)) / (2.0 * H),
+    ];
+    let norm2 = g[0] * g[0] + g[1] * g[1];
+    if !(norm2 > 0.0) {
+        return 0.0;
+    }
+    let k = d(p[0], p[1]) / norm2;
+    let on = [p[0] - k * g[0], p[1] - k * g[1]];
+    let gap = alt.curve.distance(on[0], on[1]).abs();
+    if gap.is_finite() {
+        gap
+    } else {
+        0.0
     }
 }
 
@@ -1049,7 +1088,7 @@ fn choose_segment(
             continue;
         }
         enough = true;
-        let Some((curve, _, _, st, kept)) =
+        let Some((curve, model, _, st, kept)) =
             robust_fit(&line.samples, lo..hi + 1, near_corner(p), &mut scratch)
         else {
             continue;
@@ -1057,11 +1096,21 @@ fn choose_segment(
         if kept < min_near {
             continue;
         }
-        let (variance, bound) = (st.variance_at(p), st.variance_bound_at(p));
+        let straddles = a < cut && b > cut;
+        // Beyond its samples a curve's position depends on its model far more than on their
+        // noise: the gap to the next simpler model's fit is a model variance.
+        let model_variance = if straddles {
+            0.0
+        } else {
+            model_gap(&curve, model, &scratch, p).powi(2)
+        };
+        let (variance, bound) = (
+            st.variance_at(p) + model_variance,
+            st.variance_bound_at(p) + model_variance,
+        );
         if !(variance.is_finite() && bound.is_finite()) {
             continue;
         }
-        let straddles = a < cut && b > cut;
         let better = match &best {
             None => true,
             Some((_, bs, bb)) => (straddles && !bs) || (straddles == *bs && bound < *bb),
@@ -1266,6 +1315,38 @@ mod tests {
             })
             .collect();
         rms(errs.into_iter())
+    }
+
+    #[test]
+    fn model_gap_is_the_simpler_model_s_distance_beyond_the_samples() {
+        let parabola = |points: &[[f64; 2]]| {
+            fit_edge_curve_upto(points, None, BranchGuard::Span, EdgeModel::Parabola)
+                .unwrap()
+                .curve
+        };
+        // An arc of the circle of radius 50 through the origin, x ∈ [10, 30], seen from the
+        // corner at the origin (on the circle, which the parabola model fits exactly): the gap
+        // is the total-least-squares line's distance from the origin.
+        let bent: Vec<[f64; 2]> = (0..=20)
+            .map(|i| {
+                let x = 10.0 + i as f64;
+                [x, 50.0 - (2500.0 - x * x).sqrt()]
+            })
+            .collect();
+        let gap = model_gap(&parabola(&bent), EdgeModel::Parabola, &bent, [0.0, 0.0]);
+        let line = crate::quadratic_form::fit_line_tls(&bent, None).unwrap();
+        let want = line.signed_distance(0.0, 0.0).abs();
+        assert!(want > 2.5, "the line is far from the curve: {want}");
+        assert!((gap - want).abs() < 1e-3 * want, "gap {gap}, want {want}");
+        // Straight samples: the models agree, and a line has no simpler model.
+        let straight: Vec<[f64; 2]> = (0..=20)
+            .map(|i| [10.0 + i as f64, 0.3 * i as f64])
+            .collect();
+        let p = [0.0, -3.0];
+        assert!(model_gap(&parabola(&straight), EdgeModel::Parabola, &straight, p) < 1e-6);
+        let line = fit_edge_curve_with(&straight, None, near_corner(p)).unwrap();
+        assert_eq!(line.model, EdgeModel::Line);
+        assert_eq!(model_gap(&line.curve, line.model, &straight, p), 0.0);
     }
 
     #[test]

@@ -864,6 +864,17 @@ pub fn fit_edge_curve_with(
     weights: Option<&[f64]>,
     guard: BranchGuard,
 ) -> Option<CurveFit> {
+    fit_edge_curve_upto(points, weights, guard, EdgeModel::Conic)
+}
+
+/// [`fit_edge_curve_with`] choosing among the models up to `cap` only (in the order line,
+/// parabola, conic).
+pub(crate) fn fit_edge_curve_upto(
+    points: &[[f64; 2]],
+    weights: Option<&[f64]>,
+    guard: BranchGuard,
+    cap: EdgeModel,
+) -> Option<CurveFit> {
     if !valid_input(points, weights) {
         return None;
     }
@@ -882,7 +893,7 @@ pub fn fit_edge_curve_with(
     // terms and would put a cancellation floor (10⁻¹⁶ of the extent) under a straight edge.
     let mut rss_line = fr.var_n * n * inv * inv;
     let mut best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
-    if fr.count >= 4 {
+    if fr.count >= 4 && cap != EdgeModel::Line {
         rss_line = 0.0;
         // Algebraic circle `v = (κ/2)(u² + v²) + b u + d` (vertical residuals, linear in κ, b, d)
         // from the weighted moments of 1, u and r = u² + v². A circle, not a parabola: an edge
@@ -948,7 +959,7 @@ pub fn fit_edge_curve_with(
             // The conic must bring its BIC below the best so far: RSS < n e^((BIC − k ln n)/n).
             let k_con = 3.0 + 2.0 * CONIC_PENALTY;
             let useful = n * ((best.0 - k_con * n.ln()) / n).exp();
-            let conic = if fr.count >= 6 && useful > n * RSS_FLOOR {
+            let conic = if cap == EdgeModel::Conic && fr.count >= 6 && useful > n * RSS_FLOOR {
                 sampson_refine(points, weights, &fr, inv, wn, par, start, useful)
             } else {
                 None
