@@ -303,7 +303,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 let (weak, last) = match (local.status, board) {
                     (Status::Converged, _) => (false, local),
                     (Status::Fallback, Some(board)) => (true, board),
-                    (Status::Fallback, None) => (false, local),
+                    (Status::Fallback, None) => (true, local),
                     (Status::Failed, board) => (true, board.unwrap_or(local)),
                 };
                 // When nothing else places the corner, the curves' intersection beats the
@@ -339,6 +339,15 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                             y: 0.5 * (gc.y + b.y),
                             ..gc
                         }
+                    }
+                    // A one-sided local answer against the gradient estimate: the one that
+                    // claims the smaller σ.
+                    (Some(gc), None)
+                        if last.status == Status::Fallback
+                            && last.sigma.unwrap_or(f64::INFINITY)
+                                <= gc.sigma.unwrap_or(f64::INFINITY) =>
+                    {
+                        last
                     }
                     (gc, _) => gc.unwrap_or(last),
                 })
