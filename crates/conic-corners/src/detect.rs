@@ -301,6 +301,12 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // local refiner's one-sided answer is no better; failing the gradient
                 // estimate, the board-wide answer stands.
                 let (weak, last) = match (local.status, board) {
+                    (Status::Converged, Some(board))
+                        if board.sigma.unwrap_or(f64::INFINITY)
+                            <= local.sigma.unwrap_or(f64::INFINITY) =>
+                    {
+                        (false, board)
+                    }
                     (Status::Converged, _) => (false, local),
                     (Status::Fallback, Some(board)) => (true, board),
                     (Status::Fallback, None) => (true, local),
