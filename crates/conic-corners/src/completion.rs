@@ -447,9 +447,11 @@ fn reference(image: &GrayImage, grid: &Grid, labels: &[Label]) -> Option<Referen
 /// The search starts of [`verify`], in grid steps from the prediction.
 const STARTS: [[f64; 2]; 5] = [[0.0, 0.0], [0.1, 0.0], [-0.1, 0.0], [0.0, 0.1], [0.0, -0.1]];
 /// The search starts at a boundary site with slivers beyond it, whose corners bend the
-/// prediction farther: a grid of ±0.2 step by 0.05.
-fn sliver_starts() -> impl Iterator<Item = [f64; 2]> {
-    (-4..=4).flat_map(|i| (-4..=4).map(move |j| [0.05 * i as f64, 0.05 * j as f64]))
+/// prediction farther across the boundary: a grid by 0.05 step, ±0.2 step along `u` (`v`) if
+/// the site's outer side is across the columns (rows), ±0.1 otherwise.
+fn sliver_starts(across_u: bool, across_v: bool) -> impl Iterator<Item = [f64; 2]> {
+    let (ku, kv) = (if across_u { 4 } else { 2 }, if across_v { 4 } else { 2 });
+    (-ku..=ku).flat_map(move |i| (-kv..=kv).map(move |j| [0.05 * i as f64, 0.05 * j as f64]))
 }
 /// How far (px) the edge-walk placement of a sliver's corner may move when started from itself
 /// (the gradient estimate's own default limit).
@@ -603,7 +605,7 @@ fn complete_one(
                                     p,
                                     (u, v),
                                     &sliver(s),
-                                    sliver_starts(),
+                                    sliver_starts(outer_u.contains(&true), outer_v.contains(&true)),
                                     phase,
                                     min_contrast,
                                     params,
