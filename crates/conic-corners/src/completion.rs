@@ -447,29 +447,34 @@ fn reference(image: &GrayImage, grid: &Grid, labels: &[Label]) -> Option<Referen
 /// The search starts of [`verify`], in grid steps from the prediction.
 const STARTS: [[f64; 2]; 5] = [[0.0, 0.0], [0.1, 0.0], [-0.1, 0.0], [0.0, 0.1], [0.0, -0.1]];
 /// The search starts at a boundary site with slivers beyond it, whose corners bend the
-/// prediction farther across the boundary: a grid by 0.05 step, ±0.2 step along `u` (`v`) if
-/// the site's outer side is across the columns (rows), ±0.1 otherwise.
+/// prediction farther across the boundary: a grid by 0.1 step, ±0.2 step along `u` (`v`) if
+/// the site's outer side is across the columns (rows), ±0.1 otherwise; [`verify`] refines the
+/// best of them by 0.05 step.
 fn sliver_starts(across_u: bool, across_v: bool) -> impl Iterator<Item = [f64; 2]> {
-    let (ku, kv) = (if across_u { 4 } else { 2 }, if across_v { 4 } else { 2 });
-    (-ku..=ku).flat_map(move |i| (-kv..=kv).map(move |j| [0.05 * i as f64, 0.05 * j as f64]))
+    let (ku, kv) = (if across_u { 2 } else { 1 }, if across_v { 2 } else { 1 });
+    (-ku..=ku).flat_map(move |i| (-kv..=kv).map(move |j| [0.1 * i as f64, 0.1 * j as f64]))
 }
 /// How far (px) the edge-walk placement of a sliver's corner may move when started from itself
 /// (the gradient estimate's own default limit).
 const SLIVER_CONFIRM_SHIFT: f64 = 1.5;
 /// The refiner's reaches of check (c), in grid steps, longest first.
 const REACHES: [f64; 4] = [1.0, 0.5, 0.3, 0.15];
+/// The step (grid steps) by which [`verify`] refines the best of the [`sliver_starts`].
+const SLIVER_REFINE_STEP: f64 = 0.05;
 /// The scales of a sliver's side of the frame tried at a boundary site.
 const SLIVER_SCALES: [f64; 2] = [0.5, 0.25];
 
 /// Searches the best junction near `p` (coarse to fine, from the one of `starts` with the highest
-/// quick-test contrast) and applies checks (a), (b). The search moves by the grid steps `(u, v)`;
-/// `starts` are offsets in them; the samples are taken in `frame`.
+/// quick-test contrast, or of its 8 neighbours `refine_step` away if one is higher; 0: none) and
+/// applies checks (a), (b). The search moves by the grid steps `(u, v)`; `starts` are offsets in
+/// them; the samples are taken in `frame`.
 fn verify(
     image: &GrayImage,
     p: P,
     (u, v): (P, P),
     frame: &Frame,
     starts: impl Iterator<Item = [f64; 2]>,
+    refine_step: f64,
     phase: f64,
     min_contrast: f64,
     params: &CompletionParams,
@@ -480,12 +485,28 @@ fn verify(
     // Cheap rejection first, on 20 samples: near a true junction (within about 0.1 step) the
     // quadrants are already in order with half the contrast required of the result. The search
     // starts from the start of highest contrast.
-    let start = starts
-        .map(|[i, j]| moved(p, i, j))
-        .filter_map(|q| Some((q, quick_contrast(image, q, frame, phase)?)))
-        .filter(|&(_, c)| c >= 0.5 * min_contrast)
-        .max_by(|a, b| a.1.total_cmp(&b.1))?
-        .0;
+    let quick = |q: P| Some((q, quick_contrast(image, q, frame, phase)?));
+    let best_of = |it: &mut dyn Iterator<Item = P>| {
+        it.filter_map(quick)
+            .max_by(|a: &(P, f64), b: &(P, f64)| a.1.total_cmp(&b.1))
+    };
+    let coarse = best_of(&mut starts.map(|[i, j]| moved(p, i, j)))?;
+    let around = (-1..=1)
+        .flat_map(|i| (-1..=1).map(move |j| (i, j)))
+        .filter(|&ij| ij != (0, 0))
+        .map(|(i, j)| moved(coarse.0, refine_step * i as f64, refine_step * j as f64));
+    let fine = if refine_step > 0.0 {
+        best_of(&mut around.into_iter())
+    } else {
+        None
+    };
+    let (start, contrast) = match fine {
+        Some(f) if f.1 > coarse.1 => f,
+        _ => coarse,
+    };
+    if contrast < 0.5 * min_contrast {
+        return None;
+    }
     let (mut best, mut best_s) = (start, score(start)?);
     for h in [0.1, 0.05, 0.025] {
         let centre = best;
@@ -591,6 +612,7 @@ fn complete_one(
                     (u, v),
                     &Frame::symmetric(u, v),
                     STARTS.into_iter(),
+                    0.0,
                     phase,
                     min_contrast,
                     params,
@@ -606,6 +628,7 @@ fn complete_one(
                                     (u, v),
                                     &sliver(s),
                                     sliver_starts(outer_u.contains(&true), outer_v.contains(&true)),
+                                    SLIVER_REFINE_STEP,
                                     phase,
                                     min_contrast,
                                     params,
