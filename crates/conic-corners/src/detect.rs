@@ -43,11 +43,14 @@ pub struct DetectParams {
     pub gradient: Option<GradientParams>,
     /// A board-wide answer whose σ exceeds this multiple of the board's median σ is doubtful:
     /// the corner goes to the local refiner, and to the gradient estimate unless the local
-    /// refiner converges with both edges seen on both sides; a gradient estimate that agrees
-    /// with the board-wide answer within its σ is averaged with it, one that does not replaces
-    /// it. It happens at the ends of grid lines next to a silhouette, where the squares are
-    /// foreshortened to a few pixels and the curves are extrapolated. The limit is relative so
-    /// that it holds at any image scale, blur and noise. `∞` keeps every board-wide answer.
+    /// refiner converges with both edges seen on both sides. A converged local answer is kept
+    /// unless the doubtful board-wide answer claims a smaller σ; a gradient estimate that
+    /// agrees with the board-wide answer within its σ is averaged with it, one that does not
+    /// replaces it; without a board-wide answer, a one-sided local answer and the gradient
+    /// estimate compete by σ. It happens at the ends of grid lines next to a silhouette, where
+    /// the squares are foreshortened to a few pixels and the curves are extrapolated. The limit
+    /// is relative so that it holds at any image scale, blur and noise. `∞` keeps every
+    /// board-wide answer.
     pub max_board_sigma: f64,
 }
 
