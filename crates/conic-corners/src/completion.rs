@@ -665,18 +665,6 @@ fn complete_one(
                 let Some(z) = refined.or_else(last_resort) else {
                     continue;
                 };
-                // A sliver's junction is barely resolved, and the gradient estimate is off by
-                // pixels there (measured on renders past the truth's visibility limit): the edge
-                // walks, started from the corner, must come back to it.
-                let confirmed = || {
-                    REACHES.into_iter().any(|k| {
-                        refine_one(image, z, &refine_at(k, SLIVER_CONFIRM_SHIFT)).status
-                            != Status::Failed
-                    })
-                };
-                if on_sliver && !confirmed() {
-                    continue;
-                }
                 if norm(sub(z, p)) > params.max_offset * step {
                     continue;
                 }
@@ -687,6 +675,18 @@ fn complete_one(
                     .all(|&i| clear(corners[i].x, corners[i].y))
                     && accepted.iter().all(|(_, a)| clear(a.x, a.y));
                 if !free {
+                    continue;
+                }
+                // A sliver's junction is barely resolved, and the gradient estimate is off by
+                // pixels there (measured on renders past the truth's visibility limit): the edge
+                // walks, started from the corner, must come back to it.
+                let confirmed = || {
+                    REACHES.into_iter().any(|k| {
+                        refine_one(image, z, &refine_at(k, SLIVER_CONFIRM_SHIFT)).status
+                            != Status::Failed
+                    })
+                };
+                if on_sliver && !confirmed() {
                     continue;
                 }
                 let angle = |d: P| d[1].atan2(d[0]).rem_euclid(std::f64::consts::PI);
