@@ -481,25 +481,30 @@ fn verify(
 ) -> Option<(P, f64)> {
     let score =
         |q: P| -> Option<(f64, f64, f64)> { Some(junction(image, q, frame)?.phased(phase)) };
-    let moved = |q: P, i: f64, j: f64| add(q, add(scale(u, i), scale(v, j)));
+    let moved = move |q: P, i: f64, j: f64| add(q, add(scale(u, i), scale(v, j)));
+    // The 8 points `h` grid steps around `c`.
+    let ring = move |c: P, h: f64| {
+        (-1..=1)
+            .flat_map(|i| (-1..=1).map(move |j| (i, j)))
+            .filter(|&ij| ij != (0, 0))
+            .map(move |(i, j)| moved(c, h * i as f64, h * j as f64))
+    };
     // Cheap rejection first, on 20 samples: near a true junction (within about 0.1 step) the
     // quadrants are already in order with half the contrast required of the result. The search
-    // starts from the start of highest contrast.
+    // starts from the start of highest contrast, or from a point of its ring that beats it.
     let quick = |q: P| Some((q, quick_contrast(image, q, frame, phase)?));
-    let best_of = |it: &mut dyn Iterator<Item = P>| {
-        it.filter_map(quick)
-            .max_by(|a: &(P, f64), b: &(P, f64)| a.1.total_cmp(&b.1))
-    };
-    let coarse = best_of(&mut starts.map(|[i, j]| moved(p, i, j)))?;
-    let around = (-1..=1)
-        .flat_map(|i| (-1..=1).map(move |j| (i, j)))
-        .filter(|&ij| ij != (0, 0))
-        .map(|(i, j)| moved(coarse.0, refine_step * i as f64, refine_step * j as f64));
-    let fine = if refine_step > 0.0 {
-        best_of(&mut around.into_iter())
-    } else {
-        None
-    };
+    let by_contrast = |a: &(P, f64), b: &(P, f64)| a.1.total_cmp(&b.1);
+    let coarse = starts
+        .map(|[i, j]| moved(p, i, j))
+        .filter_map(quick)
+        .max_by(by_contrast)?;
+    let fine = (refine_step > 0.0)
+        .then(|| {
+            ring(coarse.0, refine_step)
+                .filter_map(quick)
+                .max_by(by_contrast)
+        })
+        .flatten();
     let (start, contrast) = match fine {
         Some(f) if f.1 > coarse.1 => f,
         _ => coarse,
@@ -509,17 +514,10 @@ fn verify(
     }
     let (mut best, mut best_s) = (start, score(start)?);
     for h in [0.1, 0.05, 0.025] {
-        let centre = best;
-        for i in -1..=1 {
-            for j in -1..=1 {
-                if (i, j) == (0, 0) {
-                    continue;
-                }
-                let q = moved(centre, h * i as f64, h * j as f64);
-                if let Some(s) = score(q) {
-                    if s.0 > best_s.0 {
-                        (best, best_s) = (q, s);
-                    }
+        for q in ring(best, h) {
+            if let Some(s) = score(q) {
+                if s.0 > best_s.0 {
+                    (best, best_s) = (q, s);
                 }
             }
         }
