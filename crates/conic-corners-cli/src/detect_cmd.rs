@@ -36,7 +36,8 @@ pub struct DetectArgs {
     draw_dir: Option<PathBuf>,
     /// How corners are placed: `local` (single-corner refiner) or `board` (row and column curves
     /// fitted along the whole board, local where a line has too few samples). Corners the local
-    /// refiner fails on, and doubtful board answers, take the gradient estimate (path `gradient`).
+    /// refiner fails on or sees on one side only, and doubtful board answers, take the junction
+    /// model (path `junction`), failing that the gradient estimate (path `gradient`).
     #[arg(long = "refine", value_name = "MODE", default_value = "board", value_parser = ["local", "board"])]
     mode: String,
     /// Print CSV rows (image,board,row,col,x,y,score,status,path,sigma) instead of JSON.

@@ -323,7 +323,10 @@ fn detect_finds_and_labels_a_rendered_board() {
     for row in text.lines().skip(1) {
         let f: Vec<&str> = row.split(',').collect();
         assert_eq!(f.len(), 10, "{row}");
-        assert!(["board", "local", "gradient"].contains(&f[8]), "{row}");
+        assert!(
+            ["board", "local", "junction", "gradient"].contains(&f[8]),
+            "{row}"
+        );
         let sigma: f64 = f[9].parse().expect("a placed corner has a sigma");
         assert!(sigma > 0.0 && sigma < 1.0, "{row}");
     }

@@ -37,12 +37,15 @@ const PATH_LOCAL: u8 = 0;
 const PATH_BOARD: u8 = 1;
 /// Path code of a corner placed by the gradient-orthogonality estimate (last resort).
 const PATH_GRADIENT: u8 = 2;
+/// Path code of a corner placed by the blurred X-junction model fitted to its pixels.
+const PATH_JUNCTION: u8 = 3;
 
 fn path_code(p: Path) -> u8 {
     match p {
         Path::Local => PATH_LOCAL,
         Path::Board => PATH_BOARD,
         Path::Gradient => PATH_GRADIENT,
+        Path::Junction => PATH_JUNCTION,
     }
 }
 
@@ -405,5 +408,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PATH_LOCAL", PATH_LOCAL)?;
     m.add("PATH_BOARD", PATH_BOARD)?;
     m.add("PATH_GRADIENT", PATH_GRADIENT)?;
+    m.add("PATH_JUNCTION", PATH_JUNCTION)?;
     Ok(())
 }

@@ -126,6 +126,9 @@ pub enum Path {
     /// the edge walks found too little to fit, or where the board-wide answer was doubtful (then
     /// averaged with that answer if the two agree within the estimate's σ).
     Gradient,
+    /// The blurred X-junction model fitted to the pixels ([`crate::junction`]): set by
+    /// [`crate::detect`] where the edge walks are one-sided or fail.
+    Junction,
 }
 
 /// Why a corner kept its local answer.
@@ -1278,7 +1281,9 @@ mod tests {
                     ));
                 }
                 Path::Local => st.local += 1,
-                Path::Gradient => unreachable!("only detect sets the gradient path"),
+                Path::Gradient | Path::Junction => {
+                    unreachable!("only detect sets the gradient and junction paths")
+                }
             }
         }
         (board, fitted, st)

@@ -10,6 +10,7 @@ use crate::connectivity::{
 };
 use crate::election::{elect, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
+use crate::junction::{refine_junction, JunctionParams};
 use crate::prefilter::{prefilter, PrefilterParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
@@ -41,6 +42,9 @@ pub struct DetectParams {
     /// The last-resort refiner ([`crate::gradient`]): it places the corners that the local
     /// refiner fails on. `None` disables it, and those corners keep their pixel-level position.
     pub gradient: Option<GradientParams>,
+    /// The junction-model refiner ([`crate::junction`]): it places the corners whose edge walks
+    /// are one-sided or failed, before the gradient estimate is tried. `None` disables it.
+    pub junction: Option<JunctionParams>,
     /// A board-wide answer whose σ exceeds this multiple of the board's median σ is doubtful:
     /// the corner goes to the local refiner, and to the gradient estimate unless the local
     /// refiner converges with both edges seen on both sides. A converged local answer is kept
@@ -87,6 +91,7 @@ impl Default for DetectParams {
                 ..BoardFitParams::default()
             },
             gradient: Some(GradientParams::default()),
+            junction: Some(JunctionParams::default()),
             max_board_sigma: 5.0,
         }
     }
@@ -120,6 +125,9 @@ impl DetectParams {
         }
         if let Some(g) = &self.gradient {
             g.validate()?;
+        }
+        if let Some(j) = &self.junction {
+            j.validate()?;
         }
         self.refine.validate()
     }
@@ -241,7 +249,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
         let fitted = fitted.map(|f| f.corners);
         // The board's typical σ: a corner far above it is an outlier of its own board, whatever
         // the image's scale, blur and noise.
-        let sigma_limit = fitted.as_ref().map_or(f64::INFINITY, |f| {
+        let typical_sigma = fitted.as_ref().map_or(f64::INFINITY, |f| {
             let mut s: Vec<f64> = f
                 .iter()
                 .filter(|c| c.path == Path::Board)
@@ -250,9 +258,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             if s.is_empty() {
                 f64::INFINITY
             } else {
-                params.max_board_sigma * median_mad_in_place(&mut s).0
+                median_mad_in_place(&mut s).0
             }
         });
+        let sigma_limit = params.max_board_sigma * typical_sigma;
         board_fit_ms += ms(t);
         let t = Instant::now();
         let refined: Vec<DetectedCorner> = b
@@ -274,7 +283,12 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     })
                 });
                 if let Some(c) = board.filter(|c| c.sigma.is_some_and(|s| s <= sigma_limit)) {
-                    return c;
+                    return match params.junction.as_ref() {
+                        Some(j) if c.sigma.is_some_and(|s| s > JUNCTION_GATE * typical_sigma) => {
+                            with_junction(c, junction_corner(image, &corners, b, i, c, j))
+                        }
+                        _ => c,
+                    };
                 }
                 let reach = match graph.neighbours.get(i) {
                     Some(nb) => neighbour_reach(&corners, nb, i),
@@ -333,6 +347,11 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     }
                     _ => c,
                 };
+                if let Some(j) = params.junction.as_ref().filter(|_| weak) {
+                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j) {
+                        return jc;
+                    }
+                }
                 let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
                     return curves(last);
                 };
@@ -467,6 +486,83 @@ fn gradient_corner(
         residual: None,
         path: Path::Gradient,
         sigma: Some(g.sigma),
+        ..c
+    })
+}
+
+/// A board-wide answer whose σ exceeds this multiple of its board's median σ (less support than
+/// most: curved, short or extrapolated lines) is combined with the junction model's answer.
+const JUNCTION_GATE: f64 = 1.5;
+
+/// The board-wide answer `c` combined with the junction model's answer `j` (two estimates of
+/// mostly independent data: the curves' samples along whole grid lines, the pixels within a few
+/// pixels of the junction) by their inverse variances, if they agree within three standard
+/// deviations of their difference; `c` otherwise.
+fn with_junction(c: DetectedCorner, j: Option<DetectedCorner>) -> DetectedCorner {
+    let (Some(j), Some(sc)) = (j, c.sigma) else {
+        return c;
+    };
+    let sj = j.sigma.unwrap_or(f64::INFINITY);
+    let (wc, wj) = (1.0 / (sc * sc), 1.0 / (sj * sj));
+    let d2 = (c.x - j.x).powi(2) + (c.y - j.y).powi(2);
+    if !(wj > 0.0) {
+        return c;
+    }
+    if d2 > 9.0 * (sc * sc + sj * sj) {
+        return if sj < sc { j } else { c };
+    }
+    DetectedCorner {
+        x: (wc * c.x + wj * j.x) / (wc + wj),
+        y: (wc * c.y + wj * j.y) / (wc + wj),
+        sigma: Some((wc + wj).recip().sqrt()),
+        ..c
+    }
+}
+
+/// `c` (the pixel-level corner `i` of `board`) placed by the junction model fitted from its
+/// position, with the edge directions and the window's radius taken from its labelled
+/// neighbours: the window reaches half-way to the nearest of its eight neighbours, where the
+/// next junction begins.
+fn junction_corner(
+    image: &GrayImage,
+    corners: &[Corner],
+    board: &LabelledBoard,
+    i: usize,
+    c: DetectedCorner,
+    params: &JunctionParams,
+) -> Option<DetectedCorner> {
+    let at = |dr: i32, dc: i32| {
+        let k = board
+            .labels
+            .iter()
+            .position(|&l| l == (c.row + dr, c.col + dc))?;
+        Some(&corners[board.corners[k]])
+    };
+    let own = &corners[i];
+    // The direction through the two neighbours on a line, or from the one there is.
+    let direction = |(dr, dc): (i32, i32)| -> Option<f64> {
+        let (a, b) = (at(-dr, -dc).unwrap_or(own), at(dr, dc).unwrap_or(own));
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        (dx != 0.0 || dy != 0.0).then(|| dy.atan2(dx))
+    };
+    let angles = match (direction((0, 1)), direction((1, 0))) {
+        (Some(u), Some(v)) => [u, v],
+        _ => own.angles,
+    };
+    let nearest = (-1..=1)
+        .flat_map(|dr| (-1..=1).map(move |dc| (dr, dc)))
+        .filter(|&d| d != (0, 0))
+        .filter_map(|(dr, dc)| at(dr, dc))
+        .map(|n| (n.x - own.x).hypot(n.y - own.y))
+        .fold(f64::INFINITY, f64::min);
+    let j = refine_junction(image, [c.x, c.y], angles, 0.5 * nearest, 1.0, params)?;
+    Some(DetectedCorner {
+        x: j.point[0],
+        y: j.point[1],
+        status: Status::Fallback,
+        residual: None,
+        path: Path::Junction,
+        sigma: Some(j.sigma),
         ..c
     })
 }

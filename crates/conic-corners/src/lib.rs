@@ -33,6 +33,7 @@ pub mod edge_sampling;
 pub mod election;
 pub mod gradient;
 pub mod image;
+pub mod junction;
 pub mod prefilter;
 pub mod quadratic_form;
 pub mod refine;

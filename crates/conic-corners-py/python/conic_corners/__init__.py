@@ -25,11 +25,13 @@ straight lines instead of curves), :data:`CONVERGED` (2).
 
 Path codes (``Board.paths``): :data:`PATH_LOCAL` (0, placed by the single-corner refiner),
 :data:`PATH_BOARD` (1, the intersection of the row and column curves fitted along the whole board,
-with a standard deviation in ``Board.sigmas`` like every placed corner) and :data:`PATH_GRADIENT` (2, the
-gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort); :func:`detect`
-fits board-wide by default and falls back to the local refiner per corner where a grid line has too
-few samples, and to the gradient estimate where the local refiner fails or the board-wide answer is
-doubtful (foreshortened squares at a silhouette; there the two are averaged where they agree).
+with a standard deviation in ``Board.sigmas`` like every placed corner), :data:`PATH_GRADIENT` (2, the
+gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort) and
+:data:`PATH_JUNCTION` (3, a blurred X-junction model fitted to the pixels around the corner);
+:func:`detect` fits board-wide by default and falls back to the local refiner per corner where a grid
+line has too few samples, to the junction model where the local refiner fails or sees one side only
+(foreshortened squares at a silhouette), and to the gradient estimate where that fails too. A
+board-wide answer with less support than most of its board's is averaged with the junction model's.
 
 Errors: a wrong dtype raises ``TypeError``; a wrong shape, an empty array, non-finite values or an
 out-of-range parameter raise ``ValueError``.
@@ -55,6 +57,7 @@ __all__ = [
     "PATH_LOCAL",
     "PATH_BOARD",
     "PATH_GRADIENT",
+    "PATH_JUNCTION",
     "PATH_NAMES",
 ]
 
@@ -66,8 +69,9 @@ STATUS_NAMES: Tuple[str, str, str] = ("failed", "fallback", "converged")
 PATH_LOCAL: int = _native.PATH_LOCAL
 PATH_BOARD: int = _native.PATH_BOARD
 PATH_GRADIENT: int = _native.PATH_GRADIENT
-#: Path code → name, the names the CLI prints in its JSON ("local", "board", "gradient").
-PATH_NAMES: Tuple[str, str, str] = ("local", "board", "gradient")
+PATH_JUNCTION: int = _native.PATH_JUNCTION
+#: Path code → name, the names the CLI prints in its JSON.
+PATH_NAMES: Tuple[str, str, str, str] = ("local", "board", "gradient", "junction")
 
 
 @dataclass(frozen=True, eq=False)

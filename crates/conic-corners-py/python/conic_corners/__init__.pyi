@@ -22,8 +22,10 @@ PATH_BOARD: int
 """Path 1: intersection of the board-wide row and column curves."""
 PATH_GRADIENT: int
 """Path 2: placed by the gradient-orthogonality estimate (last resort)."""
-PATH_NAMES: Tuple[str, str, str]
-"""Path code -> name ("local", "board", "gradient")."""
+PATH_JUNCTION: int
+"""Path 3: placed by the blurred X-junction model fitted to its pixels."""
+PATH_NAMES: Tuple[str, str, str, str]
+"""Path code -> name ("local", "board", "gradient", "junction")."""
 
 class Board:
     """One detected board: its labelled corners sorted by (row, col)."""
@@ -41,7 +43,7 @@ class Board:
     residuals: npt.NDArray[np.float64]
     """N RMS fit residuals in px, NaN where not refined."""
     paths: npt.NDArray[np.uint8]
-    """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT)."""
+    """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT, PATH_JUNCTION)."""
     sigmas: npt.NDArray[np.float64]
     """N standard deviations (px, worst direction) of the positions, NaN where refinement failed."""
     def __init__(
