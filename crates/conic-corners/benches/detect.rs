@@ -9,6 +9,8 @@
 //!   `../shared/images/curved-hydramarker/curve_6.jpg` from the workspace root (skipped with a
 //!   message when missing).
 //!
+//! Each image is also timed with the junction model disabled (`*_without_junction`).
+//!
 //! Every case runs inside a one-thread rayon pool, so the numbers are single-core whatever
 //! `RAYON_NUM_THREADS` says. Target (issue "Board detection", item 8): ≤ 15 ms on `board`.
 //!
@@ -48,6 +50,10 @@ fn bench_detect(c: &mut Criterion) {
         Err(e) => eprintln!("detect bench: skipping curve_6 ({e})"),
     }
     let default = DetectParams::default();
+    let without_junction = DetectParams {
+        junction: None,
+        ..DetectParams::default()
+    };
     let mut group = c.benchmark_group("detect");
     group
         .sample_size(10)
@@ -66,6 +72,10 @@ fn bench_detect(c: &mut Criterion) {
         );
         group.bench_function(*name, |b| {
             b.iter(|| pool.install(|| detect(black_box(image), &default)))
+        });
+        // The junction model's share of the time, in the same run.
+        group.bench_function(format!("{name}_without_junction"), |b| {
+            b.iter(|| pool.install(|| detect(black_box(image), &without_junction)))
         });
     }
     group.finish();
