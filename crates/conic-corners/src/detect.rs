@@ -347,9 +347,17 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     }
                     _ => c,
                 };
+                // The junction model where the walks failed or saw one side only; a one-sided
+                // local answer with no board answer stays if it claims the smaller σ.
                 if let Some(j) = params.junction.as_ref().filter(|_| weak) {
                     if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j) {
-                        return jc;
+                        let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
+                        let one_sided = last.status == Status::Fallback && board.is_none();
+                        return if one_sided && sigma(&last) <= sigma(&jc) {
+                            last
+                        } else {
+                            jc
+                        };
                     }
                 }
                 let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
