@@ -43,15 +43,19 @@ pub struct DetectParams {
     /// refiner fails on. `None` disables it, and those corners keep their pixel-level position.
     pub gradient: Option<GradientParams>,
     /// The junction-model refiner ([`crate::junction`]): it places the corners whose edge walks
-    /// are one-sided or failed, before the gradient estimate is tried. `None` disables it.
+    /// are one-sided or failed, before the gradient estimate is tried, and it is averaged by
+    /// inverse variances into the board-wide answers whose σ is above 1.5× their board's
+    /// median (taking the one with the smaller σ where the two differ by more than 3σ of their
+    /// difference). `None` disables it.
     pub junction: Option<JunctionParams>,
     /// A board-wide answer whose σ exceeds this multiple of the board's median σ is doubtful:
-    /// the corner goes to the local refiner, and to the gradient estimate unless the local
-    /// refiner converges with both edges seen on both sides. A converged local answer is kept
-    /// unless the doubtful board-wide answer claims a smaller σ; a gradient estimate that
-    /// agrees with the board-wide answer within its σ is averaged with it, one that does not
-    /// replaces it; without a board-wide answer, a one-sided local answer and the gradient
-    /// estimate compete by σ. It happens at the ends of grid lines next to a silhouette, where
+    /// the corner goes to the local refiner, and to the junction model (failing that, the
+    /// gradient estimate) unless the local refiner converges with both edges seen on both
+    /// sides. A converged local answer is kept unless the doubtful board-wide answer claims a
+    /// smaller σ. The junction model's answer replaces the doubtful board-wide one; a gradient
+    /// estimate that agrees with the board-wide answer within its σ is averaged with it, one
+    /// that does not replaces it; without a board-wide answer, a one-sided local answer and the
+    /// junction model's (or the gradient estimate's) answer compete by σ. It happens at the ends of grid lines next to a silhouette, where
     /// the squares are foreshortened to a few pixels and the curves are extrapolated. The limit
     /// is relative so that it holds at any image scale, blur and noise. `∞` keeps every
     /// board-wide answer.
@@ -147,8 +151,9 @@ pub struct DetectedCorner {
     /// Template-matching score of the corner (normalized cross-correlation).
     pub score: f64,
     /// How the subpixel position was obtained: `Converged` for board-wide answers and the local
-    /// refiner's full answers, `Fallback` for its answers with less support, for the gradient
-    /// estimate, and for a board-wide answer taken although it lies farther than the board fit's
+    /// refiner's full answers, `Fallback` for its answers with less support, for the junction
+    /// model and the gradient estimate, and for a board-wide answer taken although it lies
+    /// farther than the board fit's
     /// `max_shift` from the pixel-level position (only where no refiner could place the corner);
     /// `Failed` keeps the pixel-level position.
     pub status: Status,
@@ -157,8 +162,9 @@ pub struct DetectedCorner {
     /// Which refiner placed the corner.
     pub path: Path,
     /// Standard deviation (px) of the position in its worst direction, propagated from the
-    /// residuals of the fits that placed it (board-wide or local curves, or the gradient
-    /// estimate, whose σ is conservative); `None` when refinement failed or the local refiner's
+    /// residuals of the fits that placed it (board-wide or local curves, the junction model's
+    /// pixels, or the gradient estimate, whose σ is conservative); `None` when refinement
+    /// failed or the local refiner's
     /// curves did not meet.
     pub sigma: Option<f64>,
 }

@@ -16,6 +16,7 @@
 //! | sample-chain segmentation (III-E) | [`segmentation`] |
 //! | conic / line fitting and intersection (III-F) | [`quadratic_form`] |
 //! | the same along whole grid lines (III-D to III-F) | [`board_fit`] |
+//! | blurred X-junction model fitted to the pixels (short, crowded edges) | [`junction`] |
 //! | last-resort gradient-orthogonality refinement | [`gradient`] |
 //!
 //! [`detect`] runs the whole pipeline on an image.
