@@ -30,7 +30,7 @@
 //! to the next junctions: beyond them the pattern is no longer one X.
 //!
 //! **Uncertainty.** The covariance of `q` from the Gauss–Newton normal matrix scaled by the
-//! residual variance, in the worst direction, times [`SIGMA_SCALE`]: with the curvatures free the
+//! residual variance, in the worst direction, times 3: with the curvatures free the
 //! position scatters about three times as widely under noise as the linearized covariance says.
 //! A biased model (the window reaching another edge) is not in it.
 //!
