@@ -747,6 +747,38 @@ mod tests {
     }
 
     #[test]
+    fn the_quadrature_is_exact_for_edges_twelve_degrees_apart() {
+        for angle in [90f64, 45.0, 20.0, 12.0] {
+            let mut p = Vector::zeros();
+            p[3] = angle.to_radians();
+            p[6] = 1.0;
+            let g = Geometry::new(&p).unwrap();
+            let alpha = g.rho.asin();
+            for (h, k) in [
+                (0.0, 0.0),
+                (1.0, -0.5),
+                (-2.0, 1.5),
+                (2.5, 2.5),
+                (-1.0, -3.0),
+            ] {
+                // Midpoint rule on 20000 intervals.
+                let m = 20_000;
+                let dphi = alpha / m as f64;
+                let integral: f64 = (0..m)
+                    .map(|j| {
+                        let phi = (j as f64 + 0.5) * dphi;
+                        let c = phi.cos();
+                        (-(h * h + k * k - 2.0 * h * k * phi.sin()) / (2.0 * c * c)).exp() * dphi
+                    })
+                    .sum();
+                let exact = cdf(h) * cdf(k) + integral / (2.0 * PI);
+                let err = (g.wedge_value(h, k, 1.0) - exact).abs();
+                assert!(err < 2e-7, "{angle}° ({h}, {k}): {err}");
+            }
+        }
+    }
+
+    #[test]
     fn analytic_derivatives_match_differences() {
         let p = Vector::from_row_slice(&[
             10.2, 9.7, 0.3, 1.1, 0.02, -0.015, 1.2, 0.4, 0.5, 0.0, 0.0, 0.3,
