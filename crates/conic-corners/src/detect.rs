@@ -493,15 +493,20 @@ fn gradient_corner(
     params: &GradientParams,
 ) -> Option<DetectedCorner> {
     let g = refine_gradient(image, [c.x, c.y], params)?;
-    Some(DetectedCorner {
-        x: g.point[0],
-        y: g.point[1],
+    Some(fallback_at(c, g.point, g.sigma, Path::Gradient))
+}
+
+/// `c` moved to `point` by the fallback refiner `path`, with its σ.
+fn fallback_at(c: DetectedCorner, point: [f64; 2], sigma: f64, path: Path) -> DetectedCorner {
+    DetectedCorner {
+        x: point[0],
+        y: point[1],
         status: Status::Fallback,
         residual: None,
-        path: Path::Gradient,
-        sigma: Some(g.sigma),
+        path,
+        sigma: Some(sigma),
         ..c
-    })
+    }
 }
 
 /// A board-wide answer whose σ exceeds this multiple of its board's median σ (less support than
@@ -570,15 +575,7 @@ fn junction_corner(
         .map(|n| (n.x - own.x).hypot(n.y - own.y))
         .fold(f64::INFINITY, f64::min);
     let j = refine_junction(image, [c.x, c.y], angles, 0.5 * nearest, 1.0, params)?;
-    Some(DetectedCorner {
-        x: j.point[0],
-        y: j.point[1],
-        status: Status::Fallback,
-        residual: None,
-        path: Path::Junction,
-        sigma: Some(j.sigma),
-        ..c
-    })
+    Some(fallback_at(c, j.point, j.sigma, Path::Junction))
 }
 
 /// A labelled corner at its pixel-level (elected) position, not yet refined.
