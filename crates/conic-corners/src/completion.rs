@@ -30,7 +30,9 @@
 //!    last), where the squares beyond may be slivers foreshortened at a silhouette, a failed
 //!    verification is retried with the outer side of the frame scaled by 0.5, then 0.25, from
 //!    the start of highest quick contrast on a ±0.2-step grid; such a corner must also be
-//!    confirmed by the edge walks of (c) started from it, within 1.5 px. An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
+//!    confirmed within 1.5 px by the edge walks of (c) started from it, or by the junction model
+//!    ([`crate::junction`]) fitted within a quarter step with at least half the board's contrast.
+//!    An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
 //!    `k`) times `(−1)^(r+c)` is the same all over a board, and is taken from the board's own
 //!    corners by majority. A quick test on 5 samples per quadrant within 0.26 step (the quadrant
 //!    order of (a) with half its contrast) at `p̂` or one of four points 0.1 step away (the
