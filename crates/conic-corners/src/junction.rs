@@ -137,11 +137,11 @@ pub struct JunctionCorner {
     pub rms: f64,
 }
 
-/// Number of fitted parameters: `q` (2), `θ` (2), `κ` (2), `w`, `δ` (nonlinear, [`NL`]), then
-/// `c₀`, `gₓ`, `g_y`, `a`.
-const NP: usize = 12;
+/// Number of fitted parameters: `q` (2), `θ` (2), `κ` (2), `w`, `δ`, the sliver's offset
+/// (nonlinear, [`NL`]; the offset held at 0 without a sliver), then `c₀`, `gₓ`, `g_y`, `a`.
+const NP: usize = 13;
 /// Number of nonlinear parameters.
-const NL: usize = 8;
+const NL: usize = 9;
 type Normal = SMatrix<f64, NP, NP>;
 type Vector = SVector<f64, NP>;
 
@@ -174,6 +174,48 @@ pub fn refine_junction(
     blur: f64,
     params: &JunctionParams,
 ) -> Option<JunctionCorner> {
+    fit_junction(image, start, angles, radius, blur, None, params)
+}
+
+/// A third, straight edge parallel to one of the junction's: the far side of a sliver, a square
+/// foreshortened to a few pixels at a silhouette. Beyond it the pattern flips.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sliver {
+    /// The junction edge it is parallel to: 0 or 1, in the order of the `angles`.
+    pub edge: usize,
+    /// Its signed distance (px) from that edge along the edge's normal `(−sin θ, cos θ)`, at
+    /// least 0.5 px in magnitude.
+    pub offset: f64,
+}
+
+/// [`refine_junction`] with a sliver's far edge in the model (see [`Sliver`]): its offset is
+/// fitted too, from `sliver.offset`, and kept on that side of the edge, at least 0.5 px from
+/// it. Returns `None` also for an edge index other than 0 or 1 or a start offset that is below
+/// 0.5 px in magnitude or not finite.
+pub fn refine_junction_beside(
+    image: &GrayImage,
+    start: [f64; 2],
+    angles: [f64; 2],
+    radius: f64,
+    blur: f64,
+    sliver: Sliver,
+    params: &JunctionParams,
+) -> Option<JunctionCorner> {
+    if sliver.edge > 1 || !(sliver.offset.is_finite() && sliver.offset.abs() >= 0.5) {
+        return None;
+    }
+    fit_junction(image, start, angles, radius, blur, Some(sliver), params)
+}
+
+fn fit_junction(
+    image: &GrayImage,
+    start: [f64; 2],
+    angles: [f64; 2],
+    radius: f64,
+    blur: f64,
+    sliver: Option<Sliver>,
+    params: &JunctionParams,
+) -> Option<JunctionCorner> {
     if params.validate().is_err()
         || !start.iter().chain(&angles).all(|v| v.is_finite())
         || !(blur.is_finite() && blur >= 0.0)
@@ -185,7 +227,8 @@ pub fn refine_junction(
     } else {
         params.max_radius
     };
-    let pixels = Window::load(image, start, r)?;
+    let mut pixels = Window::load(image, start, r)?;
+    pixels.sliver = sliver;
     let min_sin = params.min_angle_deg.to_radians().sin();
     if angle_sin(angles[0], angles[1]).abs() < min_sin {
         return None;
@@ -196,6 +239,7 @@ pub fn refine_junction(
     p[2] = angles[0];
     p[3] = angles[1];
     p[6] = (blur * blur + 1.0 / 12.0).sqrt().max(0.5);
+    p[8] = sliver.map_or(0.0, |s| s.offset);
     pixels.levels(&mut p)?;
     let mut cost = pixels.cost(&p)?;
     let mut lambda = 1e-3;
@@ -247,7 +291,8 @@ pub fn refine_junction(
         return None;
     }
     let (jtj, _) = pixels.normal_equations(&p)?;
-    let dof = pixels.len().checked_sub(NP).filter(|&d| d > 0)? as f64;
+    let fitted = if sliver.is_some() { NP } else { NP - 1 };
+    let dof = pixels.len().checked_sub(fitted).filter(|&d| d > 0)? as f64;
     let variance = cost / dof;
     let cov = jtj.try_inverse()?;
     let (sxx, sxy, syy) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
@@ -281,6 +326,7 @@ fn angle_sin(a: f64, b: f64) -> f64 {
 
 /// The pixels of a disc: offsets from its centre (the start) and values.
 struct Window {
+    sliver: Option<Sliver>,
     centre: [f64; 2],
     dx: Vec<f64>,
     dy: Vec<f64>,
@@ -298,6 +344,7 @@ impl Window {
         }
         let n = (((x1 - x0 + 1.0) * (y1 - y0 + 1.0)) as usize).min(MAX_PIXELS);
         let mut win = Self {
+            sliver: None,
             centre: c,
             dx: Vec::with_capacity(n),
             dy: Vec::with_capacity(n),
@@ -328,7 +375,7 @@ impl Window {
     /// Sets the linear parameters `c₀, gₓ, g_y, a` (the last four entries) to their least-squares values
     /// for the geometry in `p`; `None` if the pattern does not vary over the window.
     fn levels(&self, p: &mut Vector) -> Option<()> {
-        let g = Geometry::new(p)?;
+        let g = Geometry::new(p, self.sliver)?;
         let mut ata = SMatrix::<f64, 4, 4>::zeros();
         let mut atb = SVector::<f64, 4>::zeros();
         for i in 0..self.len() {
@@ -344,7 +391,7 @@ impl Window {
 
     /// Sum of squared residuals at `p`; `None` if the geometry is degenerate.
     fn cost(&self, p: &Vector) -> Option<f64> {
-        let g = Geometry::new(p)?;
+        let g = Geometry::new(p, self.sliver)?;
         let mut sum = 0.0;
         for i in 0..self.len() {
             let s = g.value(self.offset(p, i));
@@ -357,7 +404,7 @@ impl Window {
 
     /// `JᵀJ` and `Jᵀr` of the residuals `r = I − model` at `p`.
     fn normal_equations(&self, p: &Vector) -> Option<(Normal, Vector)> {
-        let g = Geometry::new(p)?;
+        let g = Geometry::new(p, self.sliver)?;
         let mut jtj = Normal::zeros();
         let mut jtr = Vector::zeros();
         for i in 0..self.len() {
@@ -365,6 +412,10 @@ impl Window {
             let r = self.value[i] - m;
             jtj.syger(1.0, &jac, &jac, 1.0);
             jtr.axpy(r, &jac, 1.0);
+        }
+        if self.sliver.is_none() {
+            // No sliver: its offset stays where it is.
+            jtj[(8, 8)] = 1.0;
         }
         (jtj.iter().all(|v| v.is_finite()) && jtr.iter().all(|v| v.is_finite()))
             .then_some((jtj, jtr))
@@ -423,14 +474,26 @@ struct Geometry {
     drho: f64,
     /// Quadrature of the integral term: `(sin φ_j, 1/(2 cos² φ_j), weight_j)` on `[0, asin ρ]`.
     nodes: [(f64, f64, f64); 12],
+    /// A third edge beyond which the pattern flips, if modelled.
+    sliver: Option<Sliver>,
 }
 
 impl Geometry {
-    fn new(p: &Vector) -> Option<Self> {
+    /// The geometry of `p`; `sliver` gives the sliver's edge and the side its offset (`p[8]`)
+    /// must stay on, at least half a pixel from the edge. `None` for a degenerate geometry.
+    fn new(p: &Vector, sliver: Option<Sliver>) -> Option<Self> {
         let (th1, th2, w) = (p[2], p[3], p[6]);
         if !(w.is_finite() && w > 1e-3) {
             return None;
         }
+        let sliver = match sliver {
+            Some(s) if p[8] * s.offset.signum() >= 0.5 => Some(Sliver {
+                edge: s.edge,
+                offset: p[8],
+            }),
+            Some(_) => return None,
+            None => None,
+        };
         let t = [[th1.cos(), th1.sin()], [th2.cos(), th2.sin()]];
         let n = [[-t[0][1], t[0][0]], [-t[1][1], t[1][0]]];
         let rho = (th1 - th2).cos();
@@ -458,6 +521,7 @@ impl Geometry {
             root,
             drho: -(th1 - th2).sin(),
             nodes,
+            sliver,
         })
     }
 
@@ -489,13 +553,31 @@ impl Geometry {
         let k2 = sg * k;
         let a = self.wedge(h - e, k2 - e, sg);
         let b = self.wedge(-h - e, -k2 - e, sg);
-        let s = sg * (2.0 * (a.value + b.value) - 1.0);
-        let ds_dh = sg * 2.0 * (a.dh - b.dh);
-        let ds_dk = 2.0 * (a.dk - b.dk);
+        let mut s = sg * (2.0 * (a.value + b.value) - 1.0);
+        let mut ds_dh = sg * 2.0 * (a.dh - b.dh);
+        let mut ds_dk = 2.0 * (a.dk - b.dk);
         // ∂S/∂δ; e = |δ|/w.
         let ds_ddelta = -2.0 * (a.dh + a.dk + b.dh + b.dk) * self.inv_w;
-        let ds_drho = 2.0 * (a.drho + b.drho);
+        let mut ds_drho = 2.0 * (a.drho + b.drho);
         let iw = self.inv_w;
+        // ∂S/∂w beyond the paths through h and k, and ∂S/∂s (the sliver's offset).
+        let (mut ds_dw, mut ds_ds) = (0.0, 0.0);
+        if let Some(sliver) = self.sliver {
+            let t = self.sliver_term(hk, sliver);
+            s += t.value;
+            let (dh_i, dk_j) = (t.dh, t.dk);
+            if sliver.edge == 0 {
+                ds_dh += dh_i;
+                ds_dk += dk_j;
+            } else {
+                ds_dk += dh_i;
+                ds_dh += dk_j;
+            }
+            ds_drho += t.drho;
+            // u = ±(hᵢ − s/w): the offset's own dependence on w, and ∂S/∂s.
+            ds_dw += dh_i * sliver.offset * iw * iw;
+            ds_ds = -dh_i * iw;
+        }
         let mut out = [0.0; NL];
         out[0] = (ds_dh * dd[0][0] + ds_dk * dd[1][0]) * iw;
         out[1] = (ds_dh * dd[0][1] + ds_dk * dd[1][1]) * iw;
@@ -506,8 +588,10 @@ impl Geometry {
         // h = D/w − κw/2 with D the distance: ∂h/∂w = −h/w − κ; ∂e/∂w = −e/w.
         out[6] = -ds_dh * (h * iw + self.kappa[0])
             - ds_dk * (k * iw + self.kappa[1])
-            - ds_ddelta * self.delta * iw;
+            - ds_ddelta * self.delta * iw
+            + ds_dw;
         out[7] = ds_ddelta;
+        out[8] = ds_ds;
         (s, out)
     }
 }
@@ -550,11 +634,43 @@ impl Geometry {
 
     /// `S` at offset `e = x − q` without its derivatives.
     fn value(&self, e: [f64; 2]) -> f64 {
-        let [h, k] = self.scaled_distances(e);
+        let hk = self.scaled_distances(e);
         let sg = if self.delta >= 0.0 { 1.0 } else { -1.0 };
-        let (d, k) = (self.delta.abs() * self.inv_w, sg * k);
-        sg * (2.0 * (self.wedge_value(h - d, k - d, sg) + self.wedge_value(-h - d, -k - d, sg))
-            - 1.0)
+        let (d, h, k) = (self.delta.abs() * self.inv_w, hk[0], sg * hk[1]);
+        let x = sg
+            * (2.0 * (self.wedge_value(h - d, k - d, sg) + self.wedge_value(-h - d, -k - d, sg))
+                - 1.0);
+        match self.sliver {
+            Some(sliver) => x + self.sliver_value(hk, sliver),
+            None => x,
+        }
+    }
+
+    /// The sliver's term of `S` (see [`Sliver`]): the pattern flips beyond a line parallel to
+    /// edge `i` at offset `s`, so `S` gains `−2 E[X 1_R]` with `R = {±(dᵢ − s) > 0}` (the sign
+    /// of `s`); in `R` the blurred `sign(dᵢ)` is `±1` exactly, which leaves
+    /// `∓2 (2 Φ₂(u, k_j; ±ρ) − Φ(u))`, `u = ±(hᵢ − s/w)`.
+    fn sliver_value(&self, hk: [f64; 2], sliver: Sliver) -> f64 {
+        let sgn = sliver.offset.signum();
+        let (hi, kj) = (hk[sliver.edge], hk[1 - sliver.edge]);
+        let u = sgn * (hi - sliver.offset * self.inv_w);
+        -2.0 * sgn * (2.0 * self.wedge_value(u, kj, sgn) - cdf(u))
+    }
+
+    /// [`Geometry::sliver_value`] with its derivatives over `hᵢ`, `k_j` and `ρ`.
+    fn sliver_term(&self, hk: [f64; 2], sliver: Sliver) -> Wedge {
+        let sgn = sliver.offset.signum();
+        let (hi, kj) = (hk[sliver.edge], hk[1 - sliver.edge]);
+        let u = sgn * (hi - sliver.offset * self.inv_w);
+        let w = self.wedge(u, kj, sgn);
+        Wedge {
+            value: -2.0 * sgn * (2.0 * w.value - cdf(u)),
+            // ∂u/∂hᵢ = ±1 cancels the leading sign.
+            dh: -2.0 * (2.0 * w.dh - pdf(u)),
+            dk: -4.0 * sgn * w.dk,
+            // ∂(±ρ)/∂ρ = ±1.
+            drho: -4.0 * w.drho,
+        }
     }
 
     /// `(h, k)`: the distances of `e = x − q` from the two edges over `w` (module docs).
@@ -617,6 +733,18 @@ mod tests {
         delta: f64,
         blur: f64,
     ) -> GrayImage {
+        render_x_beside(q, angles, kappa, delta, blur, None)
+    }
+
+    /// [`render_x`] with the pattern flipped beyond a sliver's far edge.
+    fn render_x_beside(
+        q: [f64; 2],
+        angles: [f64; 2],
+        kappa: [f64; 2],
+        delta: f64,
+        blur: f64,
+        sliver: Option<Sliver>,
+    ) -> GrayImage {
         let (n, sub) = (41, 8);
         let t = angles.map(|a| [a.cos(), a.sin()]);
         let fine = n * sub;
@@ -630,7 +758,12 @@ mod tests {
                 v - 0.5 * kappa[i] * u * u
             };
             let (a, b) = (d(0), d(1));
-            let bright = (a > delta && b > delta) || (a < -delta && b < -delta);
+            let mut bright = (a > delta && b > delta) || (a < -delta && b < -delta);
+            if let Some(Sliver { edge, offset }) = sliver {
+                if offset.signum() * (d(edge) - offset) > 0.0 {
+                    bright = !bright;
+                }
+            }
             *v = if bright { 0.8 } else { 0.2 };
         }
         let blurred = gaussian_blur(
@@ -714,6 +847,67 @@ mod tests {
     }
 
     #[test]
+    fn a_sliver_beside_the_junction_is_modelled() {
+        // A 2.5 or 3 px sliver beyond the second edge, inside the 6 px window: the plain model
+        // is refused, the model with the sliver's far edge places the corner.
+        let (q, angles) = ([20.3, 19.8], [0.25, 1.75]);
+        let params = JunctionParams::default();
+        // The offset is fitted: it starts a pixel off.
+        for (offset, start) in [(2.5, 3.5), (-3.0, -2.0)] {
+            let truth = Sliver { edge: 1, offset };
+            let sliver = Sliver {
+                edge: 1,
+                offset: start,
+            };
+            let image = render_x_beside(q, angles, [0.0, 0.0], 0.0, 1.0, Some(truth));
+            let err = |j: Option<JunctionCorner>| {
+                j.map_or(f64::INFINITY, |j| {
+                    (j.point[0] - q[0]).hypot(j.point[1] - q[1])
+                })
+            };
+            let plain = err(refine_junction(
+                &image,
+                [20.0, 20.0],
+                angles,
+                6.0,
+                1.0,
+                &params,
+            ));
+            let beside =
+                refine_junction_beside(&image, [20.0, 20.0], angles, 6.0, 1.0, sliver, &params);
+            let e = err(beside);
+            assert!(e < 0.03, "offset {offset}: {beside:?}");
+            assert!(
+                plain > 3.0 * e,
+                "offset {offset}: plain {plain}, beside {e}"
+            );
+        }
+        // Invalid slivers are refused.
+        let image = render_x(q, angles, [0.0, 0.0], 0.0, 1.0);
+        for sliver in [
+            Sliver {
+                edge: 2,
+                offset: 2.0,
+            },
+            Sliver {
+                edge: 0,
+                offset: 0.0,
+            },
+        ] {
+            assert!(refine_junction_beside(
+                &image,
+                [20.0, 20.0],
+                angles,
+                6.0,
+                1.0,
+                sliver,
+                &params
+            )
+            .is_none());
+        }
+    }
+
+    #[test]
     fn noise_stays_within_the_reported_sigma() {
         use rand::SeedableRng;
         let (q, angles) = ([20.2, 20.1], [0.5, 2.0]);
@@ -737,7 +931,7 @@ mod tests {
         let mut p = Vector::zeros();
         p[3] = std::f64::consts::FRAC_PI_2;
         p[6] = 1.3;
-        let g = Geometry::new(&p).unwrap();
+        let g = Geometry::new(&p, None).unwrap();
         for e in [[0.4, -0.9], [2.0, 1.5], [-3.0, 0.2], [0.0, 0.0]] {
             let (h, k) = (e[1] / 1.3, -e[0] / 1.3);
             let product = erf(h * FRAC_1_SQRT_2) * erf(k * FRAC_1_SQRT_2);
@@ -752,7 +946,7 @@ mod tests {
             let mut p = Vector::zeros();
             p[3] = angle.to_radians();
             p[6] = 1.0;
-            let g = Geometry::new(&p).unwrap();
+            let g = Geometry::new(&p, None).unwrap();
             let alpha = g.rho.asin();
             for (h, k) in [
                 (0.0, 0.0),
@@ -780,25 +974,47 @@ mod tests {
 
     #[test]
     fn analytic_derivatives_match_differences() {
-        let p = Vector::from_row_slice(&[
-            10.2, 9.7, 0.3, 1.1, 0.02, -0.015, 1.2, 0.4, 0.5, 0.0, 0.0, 0.3,
+        let p0 = Vector::from_row_slice(&[
+            10.2, 9.7, 0.3, 1.1, 0.02, -0.015, 1.2, 0.4, 0.0, 0.5, 0.0, 0.0, 0.3,
         ]);
-        let g = Geometry::new(&p).unwrap();
-        let x = [11.5, 9.0];
-        let at = |p: &Vector| Geometry::new(p).unwrap().value([x[0] - p[0], x[1] - p[1]]);
-        let (s, ds) = g.pattern([x[0] - p[0], x[1] - p[1]]);
-        assert!((s - at(&p)).abs() < 1e-12);
-        for k in 0..NL {
-            let h = 1e-6;
-            let (mut up, mut down) = (p, p);
-            up[k] += h;
-            down[k] -= h;
-            let numeric = (at(&up) - at(&down)) / (2.0 * h);
-            assert!(
-                (ds[k] - numeric).abs() < 1e-6,
-                "parameter {k}: {} vs {numeric}",
-                ds[k]
-            );
+        let slivers = [
+            None,
+            Some(Sliver {
+                edge: 0,
+                offset: 1.7,
+            }),
+            Some(Sliver {
+                edge: 1,
+                offset: -2.2,
+            }),
+        ];
+        for (sliver, x) in slivers
+            .into_iter()
+            .zip([[11.5, 9.0], [10.9, 11.0], [8.6, 10.4]])
+        {
+            let mut p = p0;
+            p[8] = sliver.map_or(0.0, |s| s.offset);
+            let g = Geometry::new(&p, sliver).unwrap();
+            let at = |p: &Vector| {
+                Geometry::new(p, sliver)
+                    .unwrap()
+                    .value([x[0] - p[0], x[1] - p[1]])
+            };
+            let (s, ds) = g.pattern([x[0] - p[0], x[1] - p[1]]);
+            assert!((s - at(&p)).abs() < 1e-12, "{sliver:?}");
+            for k in 0..NL {
+                let h = 1e-6;
+                let (mut up, mut down) = (p, p);
+                up[k] += h;
+                down[k] -= h;
+                let numeric = (at(&up) - at(&down)) / (2.0 * h);
+                // The differences of the approximate erf (error 1.2·10⁻⁷) limit the agreement.
+                assert!(
+                    (ds[k] - numeric).abs() < 1e-5,
+                    "{sliver:?} parameter {k}: {} vs {numeric}",
+                    ds[k]
+                );
+            }
         }
     }
 

@@ -303,7 +303,7 @@ fn real_photos_when_present() {
         ("curve_5.jpg", 99),
         ("curve_6.jpg", 103),
         ("curve_7.jpg", 102),
-        ("curve_8.jpg", 101),
+        ("curve_8.jpg", 102),
         ("marker_real.jpg", 94),
         ("marker_real2.jpg", 121),
         ("marker_real3.jpg", 87),
