@@ -62,9 +62,7 @@
 use crate::connectivity::Board;
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
-use crate::junction::{
-    refine_junction, refine_junction_beside, JunctionCorner, JunctionParams, Sliver,
-};
+use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::GrayImage;
 use std::collections::HashMap;
@@ -472,8 +470,6 @@ const REACHES: [f64; 4] = [1.0, 0.5, 0.3, 0.15];
 const SLIVER_REFINE_STEP: f64 = 0.05;
 /// The scales of a sliver's side of the frame tried at a boundary site.
 const SLIVER_SCALES: [f64; 2] = [0.5, 0.25];
-/// The sliver width (px) the junction model's confirmation starts from (it is fitted).
-const SLIVER_OFFSET: f64 = 3.0;
 
 /// Searches the best junction near `p` (coarse to fine, from the one of `starts` with the highest
 /// quick-test contrast, or of its 8 neighbours `refine_step` away if one is higher; 0: none) and
@@ -700,45 +696,27 @@ fn complete_one(
                 // a quarter of the smaller grid step (the sliver's own width, about) must place
                 // it, with the board's contrast.
                 // Where the sliver's far edge lies inside that window, the model has it too: a
-                // line parallel to the boundary's grid line, on the outer side, its distance
-                // fitted from `SLIVER_OFFSET`.
+                // line parallel to the boundary's grid line, on the outer side.
                 let junction_confirms = || {
                     params.junction.as_ref().is_some_and(|jp| {
                         let radius = 0.25 * norm(u).min(norm(v));
-                        let angles = [angle(u), angle(v)];
-                        let places = |j: &JunctionCorner| {
-                            norm(sub(j.point, z)) <= SLIVER_CONFIRM_SHIFT
-                                && j.contrast >= min_contrast
-                        };
-                        if refine_junction(image, z, angles, radius, 1.0, jp)
-                            .is_some_and(|j| places(&j))
-                        {
-                            return true;
-                        }
                         // The boundary's grid line is edge 1 (along v) at a column boundary,
-                        // edge 0 (along u) at a row boundary; its normal (−sin θ, cos θ).
-                        let sides = [(outer_u, u, 1), (outer_v, v, 0)];
-                        sides.into_iter().any(|(outer, step, edge)| {
-                            let out = match outer {
-                                [true, false] => step,
-                                [false, true] => scale(step, -1.0),
-                                _ => return false,
-                            };
-                            let normal = [-angles[edge].sin(), angles[edge].cos()];
-                            let sign = (normal[0] * out[0] + normal[1] * out[1]).signum();
-                            let sliver = Sliver {
-                                edge,
-                                offset: sign * SLIVER_OFFSET,
-                            };
-                            // A fit that has not settled in a dozen iterations is not at a
-                            // sliver: the attempt stays cheap.
-                            let quick = JunctionParams {
-                                max_iterations: jp.max_iterations.min(12),
-                                ..jp.clone()
-                            };
-                            refine_junction_beside(image, z, angles, radius, 1.0, sliver, &quick)
-                                .is_some_and(|j| places(&j))
-                        })
+                        // edge 0 (along u) at a row boundary.
+                        let outward = |outer: [bool; 2], step: P| match outer {
+                            [true, false] => Some(step),
+                            [false, true] => Some(scale(step, -1.0)),
+                            _ => None,
+                        };
+                        let beyond: Vec<(usize, P)> = [(outer_u, u, 1), (outer_v, v, 0)]
+                            .into_iter()
+                            .filter_map(|(outer, step, edge)| Some((edge, outward(outer, step)?)))
+                            .collect();
+                        let angles = [angle(u), angle(v)];
+                        refine_junction_at_boundary(image, z, angles, radius, 1.0, &beyond, jp)
+                            .is_some_and(|j| {
+                                norm(sub(j.point, z)) <= SLIVER_CONFIRM_SHIFT
+                                    && j.contrast >= min_contrast
+                            })
                     })
                 };
                 if on_sliver && !confirmed() && !junction_confirms() {

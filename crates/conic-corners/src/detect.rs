@@ -10,7 +10,7 @@ use crate::connectivity::{
 };
 use crate::election::{elect, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
-use crate::junction::{refine_junction, JunctionParams};
+use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::prefilter::{prefilter, PrefilterParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
@@ -291,7 +291,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 if let Some(c) = board.filter(|c| c.sigma.is_some_and(|s| s <= sigma_limit)) {
                     return match params.junction.as_ref() {
                         Some(j) if c.sigma.is_some_and(|s| s > JUNCTION_GATE * typical_sigma) => {
-                            with_junction(c, junction_corner(image, &corners, b, i, c, j))
+                            with_junction(c, junction_corner(image, &corners, b, i, c, j, false))
                         }
                         _ => c,
                     };
@@ -356,7 +356,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // The junction model where the walks failed or saw one side only; a one-sided
                 // local answer with no board answer stays if it claims the smaller σ.
                 if let Some(j) = params.junction.as_ref().filter(|_| weak) {
-                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j) {
+                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
                         let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
                         let one_sided = last.status == Status::Fallback && board.is_none();
                         return if one_sided && sigma(&last) <= sigma(&jc) {
@@ -541,7 +541,9 @@ fn with_junction(c: DetectedCorner, j: Option<DetectedCorner>) -> DetectedCorner
 /// `c` (the pixel-level corner `i` of `board`) placed by the junction model fitted from its
 /// position, with the edge directions and the window's radius taken from its labelled
 /// neighbours: the window reaches half-way to the nearest of its eight neighbours, where the
-/// next junction begins.
+/// next junction begins. With `slivers`, an edge with no neighbour beyond it may have a sliver
+/// there ([`refine_junction_at_boundary`]): the fallbacks, not the averaging into board
+/// answers, which would pay for it on every boundary corner.
 fn junction_corner(
     image: &GrayImage,
     corners: &[Corner],
@@ -549,6 +551,7 @@ fn junction_corner(
     i: usize,
     c: DetectedCorner,
     params: &JunctionParams,
+    slivers: bool,
 ) -> Option<DetectedCorner> {
     let at = |dr: i32, dc: i32| {
         let k = board
@@ -574,7 +577,26 @@ fn junction_corner(
         .filter_map(|(dr, dc)| at(dr, dc))
         .map(|n| (n.x - own.x).hypot(n.y - own.y))
         .fold(f64::INFINITY, f64::min);
-    let j = refine_junction(image, [c.x, c.y], angles, 0.5 * nearest, 1.0, params)?;
+    // The edges with no neighbour beyond them, pointing out of the board: slivers may lie
+    // there.
+    let beyond: Vec<(usize, [f64; 2])> = [((0, 1), 1), ((0, -1), 1), ((1, 0), 0), ((-1, 0), 0)]
+        .into_iter()
+        .filter(|_| slivers)
+        .filter(|&((dr, dc), _)| at(dr, dc).is_none())
+        .filter_map(|((dr, dc), edge)| {
+            let inner = at(-dr, -dc)?;
+            Some((edge, [own.x - inner.x, own.y - inner.y]))
+        })
+        .collect();
+    let j = refine_junction_at_boundary(
+        image,
+        [c.x, c.y],
+        angles,
+        0.5 * nearest,
+        1.0,
+        &beyond,
+        params,
+    )?;
     Some(fallback_at(c, j.point, j.sigma, Path::Junction))
 }
 

@@ -207,6 +207,49 @@ pub fn refine_junction_beside(
     fit_junction(image, start, angles, radius, blur, Some(sliver), params)
 }
 
+/// Where a sliver's far edge is first sought, in px beyond the junction's edge: the slivers at
+/// a bent board's silhouette are a few pixels wide (the offset is then fitted).
+const SLIVER_START: f64 = 3.0;
+
+/// Iterations a sliver attempt of [`refine_junction_at_boundary`] may take: one that has not
+/// settled by then has no sliver to fit, and the attempts stay cheap.
+const SLIVER_ITERATIONS: usize = 12;
+
+/// [`refine_junction`] for a corner on a board's boundary, where the squares beyond may be
+/// slivers: also [`refine_junction_beside`] with a sliver beyond each edge of `beyond` (an edge
+/// index and a vector pointing out of the board across it), started 3 px out; the answer with
+/// the smallest σ.
+pub fn refine_junction_at_boundary(
+    image: &GrayImage,
+    start: [f64; 2],
+    angles: [f64; 2],
+    radius: f64,
+    blur: f64,
+    beyond: &[(usize, [f64; 2])],
+    params: &JunctionParams,
+) -> Option<JunctionCorner> {
+    let quick = JunctionParams {
+        max_iterations: params.max_iterations.min(SLIVER_ITERATIONS),
+        ..params.clone()
+    };
+    let slivers = beyond
+        .iter()
+        .filter(|&&(edge, _)| edge < 2)
+        .map(|&(edge, out)| {
+            let normal = [-angles[edge].sin(), angles[edge].cos()];
+            let sign = (normal[0] * out[0] + normal[1] * out[1]).signum();
+            let sliver = Sliver {
+                edge,
+                offset: sign * SLIVER_START,
+            };
+            refine_junction_beside(image, start, angles, radius, blur, sliver, &quick)
+        });
+    std::iter::once(refine_junction(image, start, angles, radius, blur, params))
+        .chain(slivers)
+        .flatten()
+        .min_by(|a, b| a.sigma.total_cmp(&b.sigma))
+}
+
 fn fit_junction(
     image: &GrayImage,
     start: [f64; 2],
@@ -882,6 +925,31 @@ mod tests {
                 "offset {offset}: plain {plain}, beside {e}"
             );
         }
+        // On a board's boundary the sliver is sought beyond the edge, on the side away from the
+        // board: given that side, the 2.5 px sliver is found from its 3 px start.
+        let truth = Sliver {
+            edge: 1,
+            offset: 2.5,
+        };
+        let image = render_x_beside(q, angles, [0.0, 0.0], 0.0, 1.0, Some(truth));
+        let normal = [-angles[1].sin(), angles[1].cos()];
+        let j = refine_junction_at_boundary(
+            &image,
+            [20.0, 20.0],
+            angles,
+            6.0,
+            1.0,
+            &[(1, normal)],
+            &params,
+        )
+        .unwrap();
+        assert!((j.point[0] - q[0]).hypot(j.point[1] - q[1]) < 0.03, "{j:?}");
+        // Without an edge to look beyond, it is the plain model.
+        let plain = render_x(q, angles, [0.0, 0.0], 0.0, 1.0);
+        assert_eq!(
+            refine_junction_at_boundary(&plain, [20.0, 20.0], angles, 6.0, 1.0, &[], &params),
+            refine_junction(&plain, [20.0, 20.0], angles, 6.0, 1.0, &params)
+        );
         // Invalid slivers are refused.
         let image = render_x(q, angles, [0.0, 0.0], 0.0, 1.0);
         for sliver in [
