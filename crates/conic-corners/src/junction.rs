@@ -270,12 +270,12 @@ fn fit_junction(
     } else {
         params.max_radius
     };
-    let mut pixels = Window::load(image, start, r)?;
-    pixels.sliver = sliver;
     let min_sin = params.min_angle_deg.to_radians().sin();
     if angle_sin(angles[0], angles[1]).abs() < min_sin {
         return None;
     }
+    let mut pixels = Window::load(image, start, r)?;
+    pixels.sliver = sliver;
     let mut p = Vector::zeros();
     p[0] = start[0];
     p[1] = start[1];
@@ -570,16 +570,13 @@ impl Geometry {
 
     /// `S` at offset `e = x − q` and its derivatives over `(qₓ, q_y, θ₁, θ₂, κ₁, κ₂, w)`.
     fn pattern(&self, e: [f64; 2]) -> (f64, [f64; NL]) {
-        let dot = |a: [f64; 2], b: [f64; 2]| a[0] * b[0] + a[1] * b[1];
         let mut hk = [0.0; 2];
         // d(dᵢ)/d(qₓ, q_y, θᵢ, κᵢ)
         let mut dd = [[0.0; 4]; 2];
         for i in 0..2 {
-            let (u, v) = (dot(self.t[i], e), dot(self.n[i], e));
+            let (u, v, h) = self.edge_coordinates(i, e);
             let kappa = self.kappa[i];
-            // The blur moves a curved edge's mid-level by κw²/2 towards its centre of
-            // curvature (the Gaussian's mean of κu²/2 across the tangent direction).
-            hk[i] = (v - 0.5 * kappa * u * u) * self.inv_w - 0.5 * kappa * self.w;
+            hk[i] = h;
             dd[i] = [
                 -self.n[i][0] + kappa * u * self.t[i][0],
                 -self.n[i][1] + kappa * u * self.t[i][1],
@@ -718,11 +715,22 @@ impl Geometry {
 
     /// `(h, k)`: the distances of `e = x − q` from the two edges over `w` (module docs).
     fn scaled_distances(&self, e: [f64; 2]) -> [f64; 2] {
-        [0, 1].map(|i| {
-            let u = self.t[i][0] * e[0] + self.t[i][1] * e[1];
-            let v = self.n[i][0] * e[0] + self.n[i][1] * e[1];
-            (v - 0.5 * self.kappa[i] * u * u) * self.inv_w - 0.5 * self.kappa[i] * self.w
-        })
+        [0, 1].map(|i| self.edge_coordinates(i, e).2)
+    }
+
+    /// The coordinates of `e = x − q` along and across edge `i`, `(u, v)`, and its scaled
+    /// distance from the edge `h = (v − κu²/2)/w − κw/2`: the blur moves a curved edge's
+    /// mid-level by `κw²/2` towards its centre of curvature (the Gaussian's mean of `κu²/2`
+    /// along the edge).
+    fn edge_coordinates(&self, i: usize, e: [f64; 2]) -> (f64, f64, f64) {
+        let u = self.t[i][0] * e[0] + self.t[i][1] * e[1];
+        let v = self.n[i][0] * e[0] + self.n[i][1] * e[1];
+        let kappa = self.kappa[i];
+        (
+            u,
+            v,
+            (v - 0.5 * kappa * u * u) * self.inv_w - 0.5 * kappa * self.w,
+        )
     }
 }
 
