@@ -56,7 +56,7 @@ use crate::edge_sampling::{
     profile_half_width, sample_edge_bounded, sample_edge_with, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
-    corner_covariance, edge_jump, fit_edge_curve_upto, fit_edge_curve_with, nearest_intersection,
+    corner_covariance, edge_jump, fit_edge_curve_among, fit_edge_curve_with, nearest_intersection,
     BranchGuard, Curve, EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::{median_mad_in_place, segment_chain, SegmentationParams};
@@ -546,14 +546,43 @@ struct Walk {
     limit: f64,
     /// Crossing edges (point, unit direction) near which windows are skipped.
     clash: [Option<([f64; 2], [f64; 2])>; 2],
-    /// An open walk ends after [`MAX_MISSES`] missed scanlines in a row and drops the samples in
+    /// An open walk ends after [`MISS_SPAN_PX`] of missed scanlines in a row and drops the samples in
     /// the blurred zone where the edge ended; a closed one (between two corners) goes on to the
     /// limit, across occluders.
     open: bool,
+    /// An open walk's edge on the near side of its corner, whose levels its samples must match
+    /// from the first one on (see [`Levels`]).
+    reference: Option<Levels>,
 }
 
-/// Consecutive missed scanlines that end an open walk.
-const MAX_MISSES: usize = 6;
+/// Mean absolute contrast and mean residual RMS (intensity units) of a few consecutive samples
+/// of one edge. Beyond a board's last corner the edge runs along the outer squares, which near a
+/// silhouette are slivers: there a profile's window reaches the sliver's far side and its fit is
+/// pulled off the edge by up to a few tenths of a pixel, with a residual several times the
+/// noise and a lower contrast. The samples on the near side of the corner measure what a clean
+/// profile of that edge looks like: an open walk keeps only samples within 0.8–1.25× their
+/// contrast and at most twice their residual (the contrast of one edge changes little over a
+/// square; a residual of twice the noise's is far outside its spread over ~15 samples).
+#[derive(Clone, Copy, Debug)]
+struct Levels {
+    contrast: f64,
+    rms: f64,
+}
+
+impl Levels {
+    fn matches(&self, contrast: f64, rms: f64) -> bool {
+        contrast >= 0.8 * self.contrast && contrast <= 1.25 * self.contrast && rms <= 2.0 * self.rms
+    }
+}
+
+/// Samples averaged into each end's [`Levels`].
+const LEVEL_SAMPLES: usize = 5;
+
+/// Length (px along the walk) of consecutive missed scanlines that ends an open walk. A length,
+/// not a count: near an acute junction the windows reach the crossing edge for a long way, and
+/// at `stride = 1` six missed scanlines ended extension walks there before their first sample
+/// (a boundary corner then lost its samples beyond it and was extrapolated 1.3 px off).
+const MISS_SPAN_PX: usize = 12;
 /// How far (a fraction of the profile window's half-width) a walk's first samples may lie from
 /// the line through the pixel-level corners, before the walk has samples of its own to predict
 /// from. A print's dot gain moves every edge up to a few pixels off that line (its two
@@ -561,25 +590,39 @@ const MAX_MISSES: usize = 6;
 /// 0.35 the walks lost whole squares under a gain of 1.7 px per side and the offset between the
 /// polarities went unmeasured.
 const FIRST_SAMPLES_REACH: f64 = 0.5;
+/// Fewest scanlines a walk takes before the stride is raised above 1: a short edge (a
+/// foreshortened square near a silhouette, where the curvature is highest and the corners are
+/// extrapolated farthest) is sampled on every scanline, a long one `stride` apart.
+const DENSE_SCANLINES: f64 = 12.0;
 /// Samples behind each prediction.
 const PREDICT_SAMPLES: usize = 16;
 
 /// Walks one edge (see [`Walk`]), appending sample points to `out` and, if given, their normal
 /// sigmoid widths to `widths`. A sample is accepted when its fit succeeds, it lies near the
 /// predicted crossing, has the walk's polarity and a contrast within 0.4–2.5× that of the first
-/// samples.
+/// samples, or, on an open walk with a reference, matches the reference's [`Levels`]. Returns
+/// the levels of the first and of the last [`LEVEL_SAMPLES`] accepted samples.
 fn walk_edge(
     image: &GrayImage,
     w: &Walk,
     cfg: &WalkConfig,
     out: &mut Vec<[f64; 2]>,
     mut widths: Option<&mut Vec<f64>>,
-) {
+) -> Option<(Levels, Levels)> {
     let first = out.len();
     let mut d = w.dir;
     let mut anchor = [w.from[0] + cfg.start * d[0], w.from[1] + cfg.start * d[1]];
     let mut first_scan = true;
-    let (mut misses, mut polarity, mut contrast_ref) = (0, 0.0f64, 0.0f64);
+    let stride = cfg
+        .stride
+        .min(((w.limit - cfg.start) / DENSE_SCANLINES).floor().max(1.0) as usize);
+    let (mut misses, mut polarity) = (0, 0.0f64);
+    // The last samples' (contrast, rms), a ring.
+    let mut last = [(0.0f64, 0.0f64); LEVEL_SAMPLES];
+    let mut head = Levels {
+        contrast: 0.0,
+        rms: 0.0,
+    };
     let mut tolerance = 1.0 + 0.5 * cfg.sigma;
     let mut ended = false;
     let mut count = 0usize;
@@ -588,7 +631,7 @@ fn walk_edge(
         let q = if first_scan {
             anchor
         } else {
-            next_scanline_point(anchor, d, cfg.stride)
+            next_scanline_point(anchor, d, stride)
         };
         first_scan = false;
         anchor = q;
@@ -645,12 +688,18 @@ fn walk_edge(
                     tolerance
                 };
             let same = polarity == 0.0 || a.signum() == polarity;
-            let similar = n < 5 || (a.abs() >= 0.4 * contrast_ref && a.abs() <= 2.5 * contrast_ref);
+            let similar = match w.reference {
+                Some(r) if w.open => r.matches(a.abs(), s.fit.rms),
+                _ => {
+                    n < LEVEL_SAMPLES
+                        || (a.abs() >= 0.4 * head.contrast && a.abs() <= 2.5 * head.contrast)
+                }
+            };
             (near && same && similar).then_some((s, a))
         });
         let Some((s, a)) = accepted else {
             misses += 1;
-            if w.open && misses >= MAX_MISSES {
+            if w.open && misses * stride >= MISS_SPAN_PX {
                 ended = true;
                 break;
             }
@@ -660,9 +709,11 @@ fn walk_edge(
         if polarity == 0.0 {
             polarity = a.signum();
         }
-        if n < 5 {
-            contrast_ref = (contrast_ref * n as f64 + a.abs()) / (n + 1) as f64;
+        if n < LEVEL_SAMPLES {
+            head.contrast = (head.contrast * n as f64 + a.abs()) / (n + 1) as f64;
+            head.rms = (head.rms * n as f64 + s.fit.rms) / (n + 1) as f64;
         }
+        last[n % LEVEL_SAMPLES] = (a.abs(), s.fit.rms);
         out.push(s.point);
         if let Some(wd) = widths.as_deref_mut() {
             wd.push(s.normal_width(d));
@@ -689,6 +740,17 @@ fn walk_edge(
             out.truncate(k);
         }
     }
+    let n = (out.len() - first).min(LEVEL_SAMPLES);
+    (n > 0).then(|| {
+        let (c, r) = last[..n]
+            .iter()
+            .fold((0.0, 0.0), |acc, l| (acc.0 + l.0, acc.1 + l.1));
+        let tail = Levels {
+            contrast: c / n as f64,
+            rms: r / n as f64,
+        };
+        (head, tail)
+    })
 }
 
 /// Least-squares line through `pts`: its unit direction (oriented like `d`), the projection of the
@@ -742,6 +804,7 @@ fn segment_walk(grid: &Grid, a: usize, b: usize, k: usize) -> Option<Walk> {
         limit: along,
         clash: [clash_at(grid, a, k), clash_at(grid, b, k)],
         open: false,
+        reference: None,
     })
 }
 
@@ -780,25 +843,36 @@ fn sample_and_fit_line(
     let cs = &line.corners;
     let mut pts: Vec<[f64; 2]> = Vec::new();
     let mut cuts = Vec::with_capacity(cs.len());
-    // Before the first corner: walk outwards, then reverse into chain order.
-    if params.extend {
-        if let Some(w) = extension_walk(grid, cs[0], cs[1], k) {
-            walk_edge(image, &w, cfg, &mut pts, None);
-            pts.reverse();
-        }
-    }
+    // The levels of the samples nearest the first and the last corner.
+    let (mut first, mut last) = (None, None);
     for j in 0..cs.len() - 1 {
         cuts.push((cs[j], pts.len()));
         if let Some(mut w) = segment_walk(grid, cs[j], cs[j + 1], k) {
             w.limit -= cfg.start;
-            walk_edge(image, &w, cfg, &mut pts, None);
+            if let Some((head, tail)) = walk_edge(image, &w, cfg, &mut pts, None) {
+                first = first.or((j == 0).then_some(head));
+                last = (j + 2 == cs.len()).then_some(tail);
+            }
         }
     }
     cuts.push((cs[cs.len() - 1], pts.len()));
     if params.extend {
         let n = cs.len();
-        if let Some(w) = extension_walk(grid, cs[n - 1], cs[n - 2], k) {
+        if let Some(w) = extension_walk(grid, cs[n - 1], cs[n - 2], k, last) {
             walk_edge(image, &w, cfg, &mut pts, None);
+        }
+        // Before the first corner: walk outwards, then put in front in chain order.
+        if let Some(w) = extension_walk(grid, cs[0], cs[1], k, first) {
+            let mut before = Vec::new();
+            walk_edge(image, &w, cfg, &mut before, None);
+            if !before.is_empty() {
+                before.reverse();
+                for c in &mut cuts {
+                    c.1 += before.len();
+                }
+                before.append(&mut pts);
+                pts = before;
+            }
         }
     }
     let offset = remove_polarity_offset(&mut pts, &cuts);
@@ -929,8 +1003,15 @@ fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 
     offset
 }
 
-/// The open walk from end corner `e` away from its neighbour `n`, up to one square.
-fn extension_walk(grid: &Grid, e: usize, n: usize, k: usize) -> Option<Walk> {
+/// The open walk from end corner `e` away from its neighbour `n`, up to one square; `reference`
+/// is the levels of the edge's samples between them nearest `e`.
+fn extension_walk(
+    grid: &Grid,
+    e: usize,
+    n: usize,
+    k: usize,
+    reference: Option<Levels>,
+) -> Option<Walk> {
     let (pe, pn) = (grid.points[e], grid.points[n]);
     let away = normalize([pe[0] - pn[0], pe[1] - pn[1]])?;
     let dir = grid.tangents[e][k]
@@ -949,6 +1030,7 @@ fn extension_walk(grid: &Grid, e: usize, n: usize, k: usize) -> Option<Walk> {
         limit: dist(pe, pn),
         clash: [clash_at(grid, e, k), None],
         open: true,
+        reference,
     })
 }
 
@@ -1019,16 +1101,18 @@ fn near_corner(p: [f64; 2]) -> BranchGuard {
 }
 
 /// The distance (px) at `p` between `curve` (of `model`, fitted to `points`) and the fit of the
-/// next simpler model to the same points (0 for a line, or where that fit fails): measured from
-/// the point of `curve` nearest `p`, whose normal is taken by central differences of its
-/// (approximately Euclidean) distance function.
+/// next simpler model to the same points, or for a line the parabola's (0 where that fit fails):
+/// measured from the point of `curve` nearest `p`, whose normal is taken by central differences
+/// of its (approximately Euclidean) distance function. A line has no simpler model, but it is
+/// the likeliest to be extrapolated wrongly: on 8 samples of an arc of curvature 0.01 px⁻¹ the
+/// selection took a line, and 10 px beyond them it was 1 px off with a σ of 0.03 px.
 fn model_gap(curve: &Curve, model: EdgeModel, points: &[[f64; 2]], p: [f64; 2]) -> f64 {
-    let simpler = match model {
-        EdgeModel::Line => return 0.0,
+    let alt = match model {
+        EdgeModel::Line => EdgeModel::Parabola,
         EdgeModel::Parabola => EdgeModel::Line,
         EdgeModel::Conic => EdgeModel::Parabola,
     };
-    let Some(alt) = fit_edge_curve_upto(points, None, near_corner(p), simpler) else {
+    let Some(alt) = fit_edge_curve_among(points, None, near_corner(p), alt, alt) else {
         return 0.0;
     };
     const H: f64 = 0.5;
@@ -1323,11 +1407,16 @@ mod tests {
     }
 
     #[test]
-    fn model_gap_is_the_simpler_model_s_distance_beyond_the_samples() {
+    fn model_gap_is_the_neighbouring_model_s_distance_beyond_the_samples() {
         let parabola = |points: &[[f64; 2]]| {
-            fit_edge_curve_upto(points, None, BranchGuard::Span, EdgeModel::Parabola)
-                .unwrap()
-                .curve
+            crate::quadratic_form::fit_edge_curve_upto(
+                points,
+                None,
+                BranchGuard::Span,
+                EdgeModel::Parabola,
+            )
+            .unwrap()
+            .curve
         };
         // An arc of the circle of radius 50 through the origin, x ∈ [10, 30], seen from the
         // corner at the origin (on the circle, which the parabola model fits exactly): the gap
@@ -1343,7 +1432,18 @@ mod tests {
         let want = line.signed_distance(0.0, 0.0).abs();
         assert!(want > 2.5, "the line is far from the curve: {want}");
         assert!((gap - want).abs() < 1e-3 * want, "gap {gap}, want {want}");
-        // Straight samples: the models agree, and a line has no simpler model.
+        // A line taken for the arc is compared with the parabola model, which holds the arc
+        // exactly (it starts from the circle): the gap is the circle's distance from the line's
+        // point nearest the origin, to first order (a Sampson distance: off by about d²/2R).
+        let gap = model_gap(&Curve::Line(line), EdgeModel::Line, &bent, [0.0, 0.0]);
+        let (d, n) = (line.signed_distance(0.0, 0.0), line.normal());
+        let foot = [-d * n[0], -d * n[1]];
+        let want = (foot[0].hypot(foot[1] - 50.0) - 50.0).abs();
+        assert!(
+            want > 2.5 && (gap - want).abs() < want * want / 50.0,
+            "line gap {gap}, want {want}"
+        );
+        // Straight samples: the models agree both ways.
         let straight: Vec<[f64; 2]> = (0..=20)
             .map(|i| [10.0 + i as f64, 0.3 * i as f64])
             .collect();
@@ -1351,7 +1451,7 @@ mod tests {
         assert!(model_gap(&parabola(&straight), EdgeModel::Parabola, &straight, p) < 1e-6);
         let line = fit_edge_curve_with(&straight, None, near_corner(p)).unwrap();
         assert_eq!(line.model, EdgeModel::Line);
-        assert_eq!(model_gap(&line.curve, line.model, &straight, p), 0.0);
+        assert!(model_gap(&line.curve, line.model, &straight, p) < 1e-6);
     }
 
     #[test]

@@ -274,8 +274,8 @@ impl Curve {
     }
 }
 
-/// Which model [`fit_edge_curve`] selected.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which model [`fit_edge_curve`] selected (ordered by number of parameters).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum EdgeModel {
     /// Total-least-squares line (2 parameters).
     Line,
@@ -875,6 +875,18 @@ pub(crate) fn fit_edge_curve_upto(
     guard: BranchGuard,
     cap: EdgeModel,
 ) -> Option<CurveFit> {
+    fit_edge_curve_among(points, weights, guard, EdgeModel::Line, cap)
+}
+
+/// [`fit_edge_curve_with`] choosing among the models from `floor` to `cap` only; `None` also when
+/// no model in that range can be fitted (a parabola needs 4 points, a conic 6).
+pub(crate) fn fit_edge_curve_among(
+    points: &[[f64; 2]],
+    weights: Option<&[f64]>,
+    guard: BranchGuard,
+    floor: EdgeModel,
+    cap: EdgeModel,
+) -> Option<CurveFit> {
     if !valid_input(points, weights) {
         return None;
     }
@@ -888,11 +900,20 @@ pub(crate) fn fit_edge_curve_upto(
     let wn = n / fr.sum_w;
     let line = line_of_frame(&fr)?;
     let bic = |rss: f64, k: f64| n * (rss / n).max(RSS_FLOOR).ln() + k * n.ln();
+    // The line is computed whatever the floor (the others start from its frame) but cannot win
+    // when it is below the floor.
+    let line_bic = |rss: f64| {
+        if floor > EdgeModel::Line {
+            f64::INFINITY
+        } else {
+            bic(rss, 2.0)
+        }
+    };
 
     // The line's residuals are summed from the points: `fr.var_n` is a difference of eigenvalue
     // terms and would put a cancellation floor (10⁻¹⁶ of the extent) under a straight edge.
     let mut rss_line = fr.var_n * n * inv * inv;
-    let mut best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
+    let mut best = (line_bic(rss_line), EdgeModel::Line, [0.0; 5], rss_line);
     if fr.count >= 4 && cap != EdgeModel::Line {
         rss_line = 0.0;
         // Algebraic circle `v = (κ/2)(u² + v²) + b u + d` (vertical residuals, linear in κ, b, d)
@@ -927,7 +948,7 @@ pub(crate) fn fit_edge_curve_upto(
             mv[3] += w * v * u * u;
             rss_line += w * v * v;
         }
-        best = (bic(rss_line, 2.0), EdgeModel::Line, [0.0; 5], rss_line);
+        best = (line_bic(rss_line), EdgeModel::Line, [0.0; 5], rss_line);
         let solve = |nm: Matrix3<f64>, rhs: Vector3<f64>| nm.cholesky().map(|c| c.solve(&rhs));
         let circle = solve(
             Matrix3::new(
@@ -953,7 +974,7 @@ pub(crate) fn fit_edge_curve_upto(
         if let Some((par, start)) = start {
             let rss_par = start.0;
             let b = bic(rss_par, 3.0);
-            if b < best.0 {
+            if b < best.0 && floor <= EdgeModel::Parabola {
                 best = (b, EdgeModel::Parabola, par, rss_par);
             }
             // The conic must bring its BIC below the best so far: RSS < n e^((BIC − k ln n)/n).
@@ -986,7 +1007,10 @@ pub(crate) fn fit_edge_curve_upto(
         }
     }
 
-    let (_, model, theta, rss) = best;
+    let (score, model, theta, rss) = best;
+    if model < floor || score == f64::INFINITY {
+        return None;
+    }
     let rms = (rss / n).sqrt() * scale;
     let curve = match model {
         EdgeModel::Line => Curve::Line(line),
