@@ -60,7 +60,8 @@ pub struct RefineOptions {
     #[arg(long)]
     reach: Option<f64>,
     /// Scanlines between consecutive edge samples [refine: 1; detect: 2, set 1 for the last
-    /// thousandths of a pixel at about 1.6× the refinement time].
+    /// thousandths of a pixel at about 1.6× the refinement time; in detect's board-wide fit,
+    /// edges of short squares are sampled on every scanline anyway].
     #[arg(long)]
     stride: Option<usize>,
     /// Gaussian blur σ of the image in px, if known (estimated otherwise).

@@ -70,7 +70,9 @@ use std::ops::Range;
 pub struct BoardFitParams {
     /// Gaussian blur σ (px) of the image if known; `None` measures it by a pilot walk.
     pub blur: Option<f64>,
-    /// Scanlines between consecutive edge samples (1 = every row or column).
+    /// Scanlines between consecutive edge samples (1 = every row or column). Edges shorter than
+    /// about 12 × `stride` px (foreshortened squares) are sampled on every scanline whatever
+    /// this is.
     pub stride: usize,
     /// Extend each line's chain beyond its first and last corner along the outer squares.
     pub extend: bool,
