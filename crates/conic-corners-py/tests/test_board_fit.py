@@ -75,7 +75,9 @@ def test_local_mode_has_local_paths_and_sigmas(detections):
 def test_sigma_finite_positive_on_board_path(detections):
     for name, _, _, fitted in detections:
         on_board = fitted.paths == cc.PATH_BOARD
-        assert set(fitted.paths.tolist()) <= {cc.PATH_LOCAL, cc.PATH_BOARD, cc.PATH_GRADIENT}
+        # Doubtful board answers may take the junction model's (accuracy: next test).
+        assert set(fitted.paths.tolist()) <= {
+            cc.PATH_LOCAL, cc.PATH_BOARD, cc.PATH_GRADIENT, cc.PATH_JUNCTION}
         assert on_board.mean() > 0.8, f"{name}: only {on_board.sum()}/{len(fitted)} board-fitted"
         s = fitted.sigmas
         assert (np.isfinite(s[on_board]) & (s[on_board] > 0)).all(), name
