@@ -703,7 +703,7 @@ fn walk_edge(
                 };
             let same = polarity == 0.0 || a.signum() == polarity;
             let similar = match w.reference {
-                Some(r) if w.open => r.matches(a.abs(), s.fit.rms),
+                Some(r) => r.matches(a.abs(), s.fit.rms),
                 _ => {
                     n < LEVEL_SAMPLES
                         || (a.abs() >= 0.4 * head.contrast && a.abs() <= 2.5 * head.contrast)
@@ -1364,7 +1364,7 @@ fn intersect_corner(
 mod tests {
     use super::*;
     use crate::detect::DetectedCorner;
-    use crate::quadratic_form::{Conic, Line};
+    use crate::quadratic_form::{fit_edge_curve_upto, Conic, Line};
     use crate::refine::{refine_one, RefineParams, Status};
     use crate::synth::board::{
         BoardCorner, BoardScene, Occluder, PinholeCamera, RenderedBoard, Surface,
@@ -1509,14 +1509,9 @@ mod tests {
     #[test]
     fn model_gap_is_the_neighbouring_model_s_distance_beyond_the_samples() {
         let parabola = |points: &[[f64; 2]]| {
-            crate::quadratic_form::fit_edge_curve_upto(
-                points,
-                None,
-                BranchGuard::Span,
-                EdgeModel::Parabola,
-            )
-            .unwrap()
-            .curve
+            fit_edge_curve_upto(points, None, BranchGuard::Span, EdgeModel::Parabola)
+                .unwrap()
+                .curve
         };
         // An arc of the circle of radius 50 through the origin, x ∈ [10, 30], seen from the
         // corner at the origin (on the circle, which the parabola model fits exactly): the gap

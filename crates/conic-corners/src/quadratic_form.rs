@@ -1012,8 +1012,8 @@ pub(crate) fn fit_edge_curve_among(
         }
     }
 
-    let (score, model, theta, rss) = best;
-    if model < floor || score == f64::INFINITY {
+    let (_, model, theta, rss) = best;
+    if model < floor {
         return None;
     }
     let rms = (rss / n).sqrt() * scale;
