@@ -1259,13 +1259,6 @@ fn choose_segment(
         if !(variance.is_finite() && bound.is_finite()) {
             continue;
         }
-        if let Ok(v) = std::env::var("CC_DBG") {
-            let xy: Vec<f64> = v.split(',').map(|t| t.parse().unwrap()).collect();
-            if (p[0] - xy[0]).hypot(p[1] - xy[1]) < 3.0 {
-                eprintln!("{:?} {} seg {:?} reach {reach:.1} lo..hi {lo}..{hi} nearest {:.1} {:?} kept {kept} straddles {straddles} var {:.2e} bound {:.2e} modelvar {:.2e} d_truth {:.3}",
-                    line.kind, line.index, seg.samples, (lo..=hi).map(|i| dist(line.samples[i], p)).fold(f64::INFINITY, f64::min), model, variance, bound, model_variance, curve.distance(xy[0], xy[1]));
-            }
-        }
         let better = match &best {
             None => true,
             Some((_, bs, bb)) => (straddles && !bs) || (straddles == *bs && bound < *bb),
