@@ -1196,13 +1196,6 @@ fn model_gap(curve: &Curve, model: EdgeModel, points: &[[f64; 2]], p: [f64; 2]) 
 /// the speed benchmark's board, a third window 3.5 ms.
 const NARROW_SUPPORT: f64 = 0.25;
 
-/// Samples the narrow window of [`choose_segment`] needs on each side of a corner inside its
-/// piece: with fewer on one side its fit is an extrapolation from the other, anchored by a
-/// sample or two. Next to a silhouette, where one side of a boundary corner is a few pixels of
-/// sliver, a parabola through one sample there and six beyond the corner was 0.05 px off with a
-/// σ of 0.004 px (its residuals small by luck and by model: the curvature changes fast there).
-const NARROW_MIN_SIDE: usize = 3;
-
 /// A chosen piece for one corner: the curve and its position variance at the corner.
 struct Chosen {
     curve: Curve,
@@ -1219,8 +1212,7 @@ struct Chosen {
 /// variance at the corner is kept: where the segmentation missed an inflection (short chains on
 /// a small, strongly bent board), no single model holds over the wide window, and the misfit
 /// shows in its residual variance. Variances are compared by their 95 % upper confidence bounds,
-/// so that a fit to a few samples does not win by the luck of its residuals. In a piece that
-/// holds the corner, the narrow fit needs [`NARROW_MIN_SIDE`] samples on each side of it.
+/// so that a fit to a few samples does not win by the luck of its residuals.
 fn choose_segment(
     line: &FittedLine,
     cut: usize,
@@ -1241,11 +1233,6 @@ fn choose_segment(
             continue;
         };
         if hi + 1 - lo < min_near {
-            continue;
-        }
-        let one_sided = cut.saturating_sub(lo) < NARROW_MIN_SIDE
-            || (hi + 1).saturating_sub(cut) < NARROW_MIN_SIDE;
-        if reach < support && a < cut && b > cut && one_sided {
             continue;
         }
         enough = true;
