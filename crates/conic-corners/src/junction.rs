@@ -40,7 +40,9 @@
 //! when the contrast is below ten times the residuals' RMS (no junction in the window).
 //!
 //! **Window.** The pixels within `radius` of the start, which the caller bounds by the distance
-//! to the next junctions: beyond them the pattern is no longer one X.
+//! to the next junctions: beyond them the pattern is no longer one X. At most `max_radius`
+//! (6 px); [`refine_junction_at_boundary`] also tries up to `wide_radius` (10 px) and keeps
+//! that answer where the two agree.
 //!
 //! **Uncertainty.** The covariance of `q` from the Gauss–Newton normal matrix scaled by the
 //! residual variance, in the worst direction, times 3: with the curvatures free the
@@ -242,8 +244,8 @@ const WIDEN_MIN_PX: f64 = 0.5;
 /// disagrees). The two fits share the first one's pixels, so where the model holds their
 /// positions differ by about `√(σ₁² − σ₂²)` (nested estimates); the wide answer is kept if they
 /// differ by at most three times that (at least `σ₁/4`). On the curved-board benchmark (32²
-/// sub-samples) the top curvature bin went from 0.0176 to 0.0162 px; a wide radius of 16 px
-/// gave the same there and costs 25 ms more on `curve_6.jpg` than 10 px (+16 ms).
+/// sub-samples) the top curvature bin went from 0.0176 to 0.0162 px. The wide fit costs 16 ms
+/// on `curve_6.jpg` (one thread); at 16 px it gave the same bin (0.0163 px) for 26 ms more.
 pub fn refine_junction_at_boundary(
     image: &GrayImage,
     start: [f64; 2],
