@@ -1230,6 +1230,14 @@ mod tests {
         };
         assert!(bad.validate().unwrap_err().contains("radii"));
         assert!(run([20.0, 20.0], angles, &bad).is_none());
+        for wide_radius in [f64::NAN, 40.0] {
+            let bad = JunctionParams {
+                wide_radius,
+                ..params.clone()
+            };
+            assert!(bad.validate().unwrap_err().contains("wide radius"));
+            assert!(run([20.0, 20.0], angles, &bad).is_none());
+        }
         // A flat patch and a single straight edge have no junction.
         let flat = GrayImage::filled(41, 41, 0.5).unwrap();
         assert!(refine_junction(&flat, [20.0, 20.0], angles, 7.0, 1.0, &params).is_none());
