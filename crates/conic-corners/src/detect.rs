@@ -372,10 +372,12 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // it if it claims the smaller σ. Not inside the board: at an S's inflection the
                 // model (one curvature per edge) is biased by 0.02–0.03 px where the local
                 // refiner is not.
-                let boundary = [(0, 1), (0, -1), (1, 0), (-1, 0)]
-                    .iter()
-                    .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)));
-                let doubtful = !weak && boundary && last.sigma.is_some_and(|s| s > sigma_limit);
+                let boundary = || {
+                    [(0, 1), (0, -1), (1, 0), (-1, 0)]
+                        .iter()
+                        .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)))
+                };
+                let doubtful = !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
                 if let Some(j) = params.junction.as_ref().filter(|_| doubtful) {
                     if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
                         let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);

@@ -5,8 +5,8 @@
 //! arcs), plus flat ones (pair `i` takes them in turn by `i mod 5`), in random poses in front of a
 //! fixed stereo rig with radial distortion, moderate blur (σ ∈ [0.7, 1.2] px), noise
 //! (σ ∈ [0.5, 1] % of the 0..1 range), uneven light and optional occluders; edge pixels are
-//! area-sampled with [`SUPERSAMPLE`]² sub-samples. Saves each view as the 8-bit PNG every method reads, and
-//! runs conic-corners on exactly those pixels, once per [`RefineMode`].
+//! area-sampled with [`SUPERSAMPLE`]² sub-samples. Saves each view as the 8-bit PNG every method
+//! reads, and runs conic-corners on exactly those pixels, once per [`RefineMode`].
 //!
 //! **Rig.** Both cameras are 1920×1200 pinholes with their own intrinsics and two-term radial
 //! distortion (`x_d = x_n (1 + k₁r² + k₂r⁴)`, OpenCV's model with `p₁ = p₂ = k₃ = 0`). In the rig
@@ -284,7 +284,6 @@ fn draw_board(
     Ok((template, pose))
 }
 
-/// One rendered, detected pair: its truth line and its `ours.jsonl` lines.
 /// Pair `i`'s board (sheet template and pose) and its two views, each with the seed of its noise.
 type PairScenes = (BoardScene, Isometry3<f64>, [(BoardScene, u64); 2]);
 
@@ -310,6 +309,7 @@ fn draw_pair(seed: u64, occluded_share: f64, i: usize) -> Result<PairScenes, Str
     Ok((template, pose, views))
 }
 
+/// One rendered, detected pair: its truth line and its `ours.jsonl` lines.
 fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
     let rig = Rig::new();
     let (template, pose, scenes) = draw_pair(args.seed, args.occluded_share, i)?;
