@@ -37,7 +37,22 @@ used.
 6. Calibration of the sigma (conic-corners-board): share of corners whose error is
    within 1, 2, 3 sigma (sigma = std. dev. in the worst direction; for an isotropic 2-D Gaussian the
    shares would be 39.3 %, 86.5 %, 98.9 %), over the corners that carry a sigma.
-6. Run time: mean ms per view (ours in-process, detection only, parallel inside; peers in a child
+7. Edge-information bound: for every visible true corner, the smallest RMS error (px) that an
+   unbiased estimator fitting each of its two grid lines from that line's edge pixels can reach
+   (Cramer-Rao). Each line is a step edge of contrast (white - black) x lighting gain, blurred by
+   sigma_t = sqrt(blur^2 + 1/12) (the blur and the pixel's footprint), under Gaussian noise of
+   variance noise^2 + 1/(12 * 255^2) (the 8-bit quantization): every px of edge length carries
+   the Fisher information C^2 / (2 sqrt(pi) sigma_t sigma_n^2) about the edge's normal offset.
+   Along the line the offset is an unknown parabola in arc length (curvature and tilt are
+   nuisances), over the line's visible true corners within 4 squares of the corner (the
+   benchmark's own corner window), the chord through them standing in for the arc. Where a
+   line's chain stops before 4 squares (the board's end, a silhouette, an occluder) the edge
+   may go on for part of a square that the truth does not describe, so the bound is given twice:
+   edges ending at the last visible corner, and running one square beyond it. The corner's
+   covariance follows from the two offsets' variances and the lines' normals; the bound is the
+   root of its trace. Then each method's RMSE over its matched corners divided by the RMS bound
+   (one square beyond) over the same corners: the factor lost to the information in the pixels.
+8. Run time: mean ms per view (ours in-process, detection only, parallel inside; peers in a child
    process, concurrent with another view: indicative only).
 """
 import argparse
@@ -297,6 +312,115 @@ def median(v):
     return float(np.median(v)) if len(v) else None
 
 
+BOUND_SQUARES = 4  # the corner window of the bound, in squares (as `near_squares` in board_fit)
+
+
+def line_offset_variance(points, i, beyond, w):
+    """Variance (px^2) of a step edge's normal offset at points[i], the edge running along the
+    chord polyline `points` (ordered, i the corner) and `beyond` of the end spacings past each
+    end, at most BOUND_SQUARES squares from the corner, the offset a parabola in arc length and
+    every px of edge carrying the Fisher information w."""
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.asarray(points), axis=0).T))])
+    s -= s[i]
+    square = (s[-1] - s[0]) / (len(s) - 1)
+    lo = max(s[0] - beyond * (s[1] - s[0]), -BOUND_SQUARES * square)
+    hi = min(s[-1] + beyond * (s[-1] - s[-2]), BOUND_SQUARES * square)
+    u = np.arange(lo, hi + 1e-9, 1.0)
+    X = np.vstack([np.ones_like(u), u, u * u]).T
+    F = w * X.T @ X
+    if np.linalg.cond(F) > 1e12:
+        return math.inf
+    return float(np.linalg.inv(F)[0, 0])
+
+
+def information_bound(view, beyond):
+    """{(row, col): bound px} for the visible corners of a view with both lines (see item 7)."""
+    cam = view["camera"]
+    gx, gy = view.get("lighting_gradient", (0.0, 0.0))
+    sigma_t = math.sqrt(view["blur"] ** 2 + 1.0 / 12.0)
+    var_n = view["noise"] ** 2 + 1.0 / (12.0 * 255.0 ** 2)
+    grid = {(c["row"], c["col"]): c for c in view["corners"]}
+    out = {}
+    for (r, c), q in grid.items():
+        if not q["visible"]:
+            continue
+        gain = 1 + gx * (q["x"] / cam["width"] - 0.5) + gy * (q["y"] / cam["height"] - 0.5)
+        contrast = (view["white"] - view["black"]) * gain
+        w = contrast * contrast / (2 * math.sqrt(math.pi) * sigma_t * var_n)
+        normals, variances = [], []
+        for dr, dc in ((0, 1), (1, 0)):
+            def run(sign):
+                pts = []
+                for j in range(1, BOUND_SQUARES + 1):
+                    n = grid.get((r + sign * dr * j, c + sign * dc * j))
+                    if n is None or not n["visible"]:
+                        break
+                    pts.append((n["x"], n["y"]))
+                return pts
+            back, fwd = run(-1), run(1)
+            if not back and not fwd:
+                break
+            pts = back[::-1] + [(q["x"], q["y"])] + fwd
+            i = len(back)
+            a, b = np.asarray(pts[max(i - 1, 0)]), np.asarray(pts[min(i + 1, len(pts) - 1)])
+            t = (b - a) / np.linalg.norm(b - a)
+            normals.append([-t[1], t[0]])
+            variances.append(line_offset_variance(pts, i, beyond, w))
+        if len(normals) < 2 or not all(math.isfinite(v) for v in variances):
+            continue
+        A = np.asarray(normals)
+        if abs(np.linalg.det(A)) < 1e-6:
+            continue
+        Ai = np.linalg.inv(A)
+        out[(r, c)] = math.sqrt(float(np.trace(Ai @ np.diag(variances) @ Ai.T)))
+    return out
+
+
+def bound_tables(root, per, methods):
+    """The bound per curvature bin, and each method's RMSE over the bound on its corners."""
+    truth = read_jsonl(os.path.join(root, "truth.jsonl"))
+    if not truth or not all("white" in v for t in truth for v in t["views"].values()):
+        return []
+    bounds = {0.0: {}, 1.0: {}}
+    kap = {}
+    for t in truth:
+        for v in t["views"].values():
+            for beyond, b in bounds.items():
+                b.update({(v["image"], k): x for k, x in information_bound(v, beyond).items()})
+            for c in v["corners"]:
+                kap[(v["image"], (c["row"], c["col"]))] = curvature_bin(
+                    max(abs(c["curvature"][0]), abs(c["curvature"][1])))
+    head = ["bound / method"] + BIN_NAMES + ["all", "top / flattest"]
+    body = []
+    for beyond, name in ((0.0, "bound, edges end at the last visible corner"),
+                         (1.0, "bound, edges run one square beyond it")):
+        cells, per_bin = [name], []
+        for b in range(len(BIN_NAMES)):
+            xs = [x for k, x in bounds[beyond].items() if kap[k] == b]
+            per_bin.append(rms(xs))
+            cells.append(f"{fmt(per_bin[-1])} ({len(xs)})" if xs else "- (0)")
+        cells.append(fmt(rms(list(bounds[beyond].values()))))
+        ok = per_bin[0] and per_bin[-1]
+        cells.append(f"{per_bin[-1] / per_bin[0]:.2f}" if ok else "-")
+        body.append(cells)
+    tight = bounds[1.0]
+    for m in methods:
+        cells, ratios = [f"{m}: RMSE / bound"], []
+        for b in range(len(BIN_NAMES)):
+            pairs = [(x[0], tight[x[4]]) for x in per[m] if x[1] == b and x[4] in tight]
+            ratios.append(rms([e for e, _ in pairs]) / rms([d for _, d in pairs])
+                          if pairs else None)
+            cells.append(f"{ratios[-1]:.1f}" if pairs else "-")
+        pairs = [(x[0], tight[x[4]]) for x in per[m] if x[4] in tight]
+        cells.append(f"{rms([e for e, _ in pairs]) / rms([d for _, d in pairs]):.1f}"
+                     if pairs else "-")
+        cells.append(f"{ratios[-1] / ratios[0]:.2f}" if ratios[0] and ratios[-1] else "-")
+        body.append(cells)
+    return [("Edge-information bound (px, RMS over the visible true corners) by curvature, and "
+             "each method's RMSE over the bound (one square beyond) on its matched corners; "
+             "last column: top bin over flattest", head, body)]
+
+
 def tables(root, match_px):
     methods, per, visible, stereo, pnp, ms, errors = summarize(root, match_px)
     out = []
@@ -395,6 +519,8 @@ def tables(root, match_px):
         out.append(("Reported sigma against the actual error (isotropic 2-D Gaussian: "
                     + ", ".join(f"{g:.1%}" for g in GAUSS_2D) + ", RMS err/sigma 1.41)",
                     head, body))
+
+    out += bound_tables(root, per, methods)
 
     head = ["method", "mean ms / view", "views", "failures (raised, crashed, timed out)"]
     body = [[m, fmt(float(np.mean(ms[m])) if ms[m] else None, ".0f"), str(len(ms[m])),

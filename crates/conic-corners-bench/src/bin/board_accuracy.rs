@@ -20,7 +20,8 @@
 //! - `truth.jsonl`, one line per pair: `{"pair", "surface": {"kind", ...mm}, "rows", "cols",
 //!   "square_mm", "rig": {"R", "t"}` (left camera frame → right camera frame,
 //!   `p_R = R p_L + t`, mm), `"views": {"L"|"R": {"image", "camera": {"width", "height", "fx",
-//!   "fy", "cx", "cy", "k1", "k2"}, "blur", "noise", "noise_seed", "occluders", "corners": [{"row",
+//!   "fy", "cx", "cy", "k1", "k2"}, "blur", "noise", "noise_seed", "black", "white",
+//!   "lighting_gradient", "occluders", "corners": [{"row",
 //!   "col", "x", "y", "visible", "curvature": [row line, column line]}]}}, "points3d": [[X, Y, Z]]}`
 //!   where `points3d` (row-major like `corners`) are the exact corners in the left camera frame (mm);
 //!   image coordinates x right, y down, the centre of the top-left pixel at `(0, 0)`, curvature in
@@ -346,6 +347,7 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
                 "camera": { "width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy,
                             "cx": cam.cx, "cy": cam.cy, "k1": cam.k1, "k2": cam.k2 },
                 "blur": scene.blur, "noise": scene.noise, "noise_seed": noise_seed,
+                "black": scene.black, "white": scene.white,
                 "lighting_gradient": scene.lighting_gradient, "occluders": occluders,
                 "corners": corners,
             }),
