@@ -108,19 +108,31 @@ fn median_mad(v: &[f64]) -> (f64, f64) {
     median_mad_in_place(&mut w)
 }
 
-/// Median and MAD (median absolute deviation) of `v` (upper median for an even count), computed
-/// in place: `v` is reordered and left holding the absolute deviations. `(0, 0)` if empty.
+/// Median and MAD (median absolute deviation) of `v`, computed in place: `v` is reordered and
+/// left holding the absolute deviations. For an even count each is the mean of the two middle
+/// values: the upper one alone made outlier tests on a few values depend on their signs (of
+/// four polarity jumps, one sign's outlier was caught and the other's not). `(0, 0)` if empty.
 pub(crate) fn median_mad_in_place(v: &mut [f64]) -> (f64, f64) {
     if v.is_empty() {
         return (0.0, 0.0);
     }
-    let mid = v.len() / 2;
-    let med = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let med = median_in_place(v);
     for x in v.iter_mut() {
         *x = (*x - med).abs();
     }
-    let mad = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
-    (med, mad)
+    (med, median_in_place(v))
+}
+
+/// Median of non-empty `v` (the mean of the two middle values for an even count); reorders `v`.
+fn median_in_place(v: &mut [f64]) -> f64 {
+    let (mid, odd) = (v.len() / 2, v.len() % 2 == 1);
+    let (below, upper, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    let upper = *upper;
+    if odd {
+        return upper;
+    }
+    let lower = below.iter().copied().max_by(f64::total_cmp).unwrap_or(upper);
+    0.5 * (lower + upper)
 }
 
 /// Stage 1: indices `s` where the chain should be cut into `[.., s)` and `[s, ..)` because it is
@@ -338,6 +350,19 @@ mod tests {
             .into_iter()
             .map(|p| [p[0] + n.sample(&mut rng), p[1] + n.sample(&mut rng)])
             .collect()
+    }
+
+    #[test]
+    fn median_and_mad_do_not_depend_on_the_outliers_sign() {
+        assert_eq!(median_mad_in_place(&mut []), (0.0, 0.0));
+        assert_eq!(median_mad_in_place(&mut [3.0, 1.0, 2.0]), (2.0, 1.0));
+        // Four values: the median and the MAD are the means of the two middle ones.
+        assert_eq!(median_mad_in_place(&mut [4.0, 1.0, 3.0, 2.0]), (2.5, 1.0));
+        // Four polarity jumps of about 4 px with one outlier: mirrored, the same spread.
+        let (m_hi, mad_hi) = median_mad_in_place(&mut [4.0, 4.2, 3.8, 9.0]);
+        let (m_lo, mad_lo) = median_mad_in_place(&mut [4.0, 4.2, 3.8, -1.0]);
+        assert!((m_hi - 4.1).abs() < 1e-12 && (m_lo - 3.9).abs() < 1e-12);
+        assert!((mad_hi - mad_lo).abs() < 1e-12, "{mad_hi} {mad_lo}");
     }
 
     /// Arc of radius r, one sample per unit of x (like row scanlines of a mostly horizontal edge),
