@@ -3,7 +3,8 @@
 
 Usage: board_report.py DIR [--markdown] [--match-px 2]
        board_report.py DIR --selftest   (triangulates the exact truth and solves its poses from a
-                                         perturbed start: errors must vanish)
+                                         perturbed start: errors must vanish; checks the
+                                         edge-information bound against its closed form)
 
 Reads DIR/truth.jsonl and DIR/ours.jsonl (board-accuracy), DIR/peers.jsonl (board_peers.py; may be
 missing). Every method is matched by position, the same way: each visible true corner of a view
@@ -586,11 +587,26 @@ def selftest(root):
             cos = (np.trace(R @ R0.T) - 1) / 2
             worst_deg = max(worst_deg, math.degrees(math.acos(max(-1.0, min(1.0, cos)))))
             worst_tip = max(worst_tip, float(np.linalg.norm(R @ tip + tt - (R0 @ tip + t0))))
+    # The bound of a straight edge 160 px long through the corner at its middle: the intercept
+    # of a least-squares parabola over L px of unit information has variance 9 / (4 L); two such
+    # lines crossing at right angles put the corner's squared error at twice that.
+    chain = [(20.0 * k, 0.0) for k in range(-4, 5)]
+    line_var = line_offset_variance(chain, 4, 0.0, 1.0)
+    cross = {"camera": {"width": 400, "height": 400}, "blur": math.sqrt(1 - 1 / 12),
+             "noise": math.sqrt(1 / (2 * math.sqrt(math.pi)) - 1 / (12 * 255 ** 2)),
+             "black": 0.0, "white": 1.0,
+             "corners": [{"row": r, "col": c, "x": 200 + 20.0 * c, "y": 200 + 20.0 * r,
+                          "visible": True} for r in range(-4, 5) for c in range(-4, 5)]}
+    corner = information_bound(cross, 0.0)[(0, 0)]
+    bound_ok = (abs(line_var / (9 / (4 * 160)) - 1) < 0.02
+                and abs(corner ** 2 / (2 * line_var) - 1) < 1e-9)
     ok = (n > 0 and worst_px < 1e-6 and worst_mm < 1e-6 and worst_deg < 1e-4
-          and worst_tip < 1e-4)
+          and worst_tip < 1e-4 and bound_ok)
     print(f"selftest: {n} true corners triangulated, worst reprojection {worst_px:.2e} px, "
           f"worst 3-D error {worst_mm:.2e} mm; poses from the exact corners: worst rotation "
-          f"{worst_deg:.2e} deg, worst tip {worst_tip:.2e} mm: {'OK' if ok else 'FAILED'}")
+          f"{worst_deg:.2e} deg, worst tip {worst_tip:.2e} mm; edge-information bound of a "
+          f"straight 160 px edge {line_var:.5f} (9/640 = {9 / 640:.5f}), of a right-angle "
+          f"corner {corner ** 2:.5f}: {'OK' if ok else 'FAILED'}")
     return 0 if ok else 1
 
 
