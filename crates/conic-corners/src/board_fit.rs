@@ -120,7 +120,11 @@ impl Default for BoardFitParams {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Path {
-    /// Intersection of the board-wide row and column curves.
+    /// Intersection of the board-wide row and column curves. [`crate::detect`] combines it with
+    /// the junction model's answer by their inverse covariances where the two agree and it has
+    /// less support than most of its board (its σ above 1.5× the board's median) or is doubtful
+    /// (the local refiner failed or saw one side only, or a boundary corner's σ is above the
+    /// board's limit).
     Board,
     /// The local refiner's answer (the input position), kept for the [`Fallback`] reason given.
     Local,

@@ -288,10 +288,25 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         ..pixel
                     })
                 });
+                let board_cov = fitted.as_ref().map(|f| f[k].cov);
                 if let Some(c) = board.filter(|c| c.sigma.is_some_and(|s| s <= sigma_limit)) {
-                    return match params.junction.as_ref() {
-                        Some(j) if c.sigma.is_some_and(|s| s > JUNCTION_GATE * typical_sigma) => {
-                            with_junction(c, junction_corner(image, &corners, b, i, c, j, false))
+                    return match (params.junction.as_ref(), board_cov) {
+                        (Some(j), Some(cov))
+                            if c.sigma.is_some_and(|s| s > JUNCTION_GATE * typical_sigma) =>
+                        {
+                            match junction_corner(image, &corners, b, i, c, j, false) {
+                                // Where they disagree, the one that claims the smaller σ.
+                                Some(jc) => fuse((c, cov), jc).unwrap_or_else(|| {
+                                    let sigma =
+                                        |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
+                                    if sigma(&jc.0) < sigma(&c) {
+                                        jc.0
+                                    } else {
+                                        c
+                                    }
+                                }),
+                                None => c,
+                            }
                         }
                         _ => c,
                     };
@@ -356,7 +371,13 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // The junction model where the walks failed or saw one side only; a one-sided
                 // local answer with no board answer stays if it claims the smaller σ.
                 if let Some(j) = params.junction.as_ref().filter(|_| weak) {
-                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
+                    if let Some((jc, jcov)) = junction_corner(image, &corners, b, i, pixel, j, true)
+                    {
+                        // A board answer (doubtful, but often sure of one direction: the curve
+                        // that is not extrapolated) that agrees is combined with it.
+                        if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {
+                            return f;
+                        }
                         let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
                         let one_sided = last.status == Status::Fallback && board.is_none();
                         return if one_sided && sigma(&last) <= sigma(&jc) {
@@ -379,7 +400,11 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 };
                 let doubtful = !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
                 if let Some(j) = params.junction.as_ref().filter(|_| doubtful) {
-                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
+                    if let Some((jc, jcov)) = junction_corner(image, &corners, b, i, pixel, j, true)
+                    {
+                        if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {
+                            return f;
+                        }
                         let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
                         if sigma(&jc) < sigma(&last) {
                             return jc;
@@ -533,30 +558,59 @@ fn fallback_at(c: DetectedCorner, point: [f64; 2], sigma: f64, path: Path) -> De
 /// most: curved, short or extrapolated lines) is combined with the junction model's answer.
 const JUNCTION_GATE: f64 = 1.5;
 
-/// The board-wide answer `c` combined with the junction model's answer `j` (two estimates of
-/// mostly independent data: the curves' samples along whole grid lines, the pixels within a few
-/// pixels of the junction) by their inverse variances, if they agree within three standard
-/// deviations of their difference; `c` otherwise.
-fn with_junction(c: DetectedCorner, j: Option<DetectedCorner>) -> DetectedCorner {
-    let (Some(j), Some(sc)) = (j, c.sigma) else {
-        return c;
+/// A 2×2 covariance (px², image axes).
+type Cov = [[f64; 2]; 2];
+
+/// The board-wide answer `c` (covariance `cc`) combined with the junction model's answer `j`
+/// (covariance `cj`): two estimates of mostly independent data (the curves' samples along whole
+/// grid lines, the pixels within a few pixels of the junction), weighted by their inverse
+/// covariances, so that each contributes along the direction it knows best. `None` if they
+/// disagree: the Mahalanobis distance of their difference above the 99 % point of χ²₂, or a
+/// covariance that cannot be inverted.
+fn fuse((c, cc): (DetectedCorner, Cov), (j, cj): (DetectedCorner, Cov)) -> Option<DetectedCorner> {
+    let inv = |m: Cov| -> Option<Cov> {
+        let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+        (det > 0.0 && det.is_finite()).then(|| {
+            [
+                [m[1][1] / det, -m[0][1] / det],
+                [-m[1][0] / det, m[0][0] / det],
+            ]
+        })
     };
-    let sj = j.sigma.unwrap_or(f64::INFINITY);
-    let (wc, wj) = (1.0 / (sc * sc), 1.0 / (sj * sj));
-    let d2 = (c.x - j.x).powi(2) + (c.y - j.y).powi(2);
-    if !(wj > 0.0) {
-        return c;
+    let add = |a: Cov, b: Cov| {
+        [
+            [a[0][0] + b[0][0], a[0][1] + b[0][1]],
+            [a[1][0] + b[1][0], a[1][1] + b[1][1]],
+        ]
+    };
+    let mul = |m: Cov, v: [f64; 2]| {
+        [
+            m[0][0] * v[0] + m[0][1] * v[1],
+            m[1][0] * v[0] + m[1][1] * v[1],
+        ]
+    };
+    let d = [c.x - j.x, c.y - j.y];
+    let s = inv(add(cc, cj))?;
+    let md = mul(s, d);
+    if !(d[0] * md[0] + d[1] * md[1] <= CHI2_2_99) {
+        return None;
     }
-    if d2 > 9.0 * (sc * sc + sj * sj) {
-        return if sj < sc { j } else { c };
-    }
-    DetectedCorner {
-        x: (wc * c.x + wj * j.x) / (wc + wj),
-        y: (wc * c.y + wj * j.y) / (wc + wj),
-        sigma: Some((wc + wj).recip().sqrt()),
+    let (ic, ij) = (inv(cc)?, inv(cj)?);
+    let p = inv(add(ic, ij))?;
+    let (a, b) = (mul(ic, [c.x, c.y]), mul(ij, [j.x, j.y]));
+    let [x, y] = mul(p, [a[0] + b[0], a[1] + b[1]]);
+    let worst =
+        0.5 * (p[0][0] + p[1][1]) + (0.25 * (p[0][0] - p[1][1]).powi(2) + p[0][1] * p[1][0]).sqrt();
+    (x.is_finite() && y.is_finite()).then_some(DetectedCorner {
+        x,
+        y,
+        sigma: Some(worst.sqrt()),
         ..c
-    }
+    })
 }
+
+/// The 99 % point of the χ² distribution with two degrees of freedom.
+const CHI2_2_99: f64 = 9.21;
 
 /// `c` (the pixel-level corner `i` of `board`) placed by the junction model fitted from its
 /// position, with the edge directions and the window's radius taken from its labelled
@@ -572,7 +626,7 @@ fn junction_corner(
     c: DetectedCorner,
     params: &JunctionParams,
     slivers: bool,
-) -> Option<DetectedCorner> {
+) -> Option<(DetectedCorner, Cov)> {
     let at = |dr: i32, dc: i32| {
         let k = board
             .labels
@@ -617,7 +671,7 @@ fn junction_corner(
         &beyond,
         params,
     )?;
-    Some(fallback_at(c, j.point, j.sigma, Path::Junction))
+    Some((fallback_at(c, j.point, j.sigma, Path::Junction), j.cov))
 }
 
 /// A labelled corner at its pixel-level (elected) position, not yet refined.
@@ -661,6 +715,47 @@ fn refine_corner(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fusion_takes_each_direction_from_the_estimate_that_knows_it() {
+        let at = |x: f64, y: f64, sigma: f64| DetectedCorner {
+            x,
+            y,
+            row: 0,
+            col: 0,
+            score: 1.0,
+            status: Status::Converged,
+            residual: None,
+            path: Path::Board,
+            sigma: Some(sigma),
+        };
+        // The board answer is sure of y (its row curve) and not of x (an extrapolated column
+        // curve); the junction model the other way round.
+        let board = (at(10.3, 20.0, 0.3), [[0.09, 0.0], [0.0, 1e-4]]);
+        let junction = (at(10.0, 20.02, 0.1), [[1e-4, 0.0], [0.0, 0.01]]);
+        let f = fuse(board, junction).unwrap();
+        assert!(
+            (f.x - 10.0).abs() < 1e-3 && (f.y - 20.0).abs() < 3e-4,
+            "{f:?}"
+        );
+        assert_eq!(f.path, Path::Board);
+        // The fused σ is below both of the inputs' σ in their weak directions.
+        assert!(f.sigma.unwrap() < 0.011, "{f:?}");
+        // Correlated covariances: the same answer whichever is first.
+        let (a, b) = (
+            (at(5.0, 5.0, 0.1), [[0.01, 0.004], [0.004, 0.005]]),
+            (at(5.05, 4.98, 0.1), [[0.003, -0.001], [-0.001, 0.008]]),
+        );
+        let (ab, ba) = (fuse(a, b).unwrap(), fuse(b, a).unwrap());
+        assert!((ab.x - ba.x).abs() < 1e-12 && (ab.y - ba.y).abs() < 1e-12);
+        // Disagreeing: 1 px apart where both claim 0.1 px. Singular: refused.
+        assert!(fuse(
+            (at(0.0, 0.0, 0.1), [[0.01, 0.0], [0.0, 0.01]]),
+            (at(1.0, 0.0, 0.1), [[0.01, 0.0], [0.0, 0.01]])
+        )
+        .is_none());
+        assert!(fuse((at(10.0, 20.02, 0.1), [[0.0, 0.0], [0.0, 0.01]]), junction).is_none());
+    }
 
     #[test]
     fn neighbours_predict_a_corner_from_opposite_pairs() {

@@ -134,6 +134,9 @@ pub struct JunctionCorner {
     pub point: [f64; 2],
     /// Standard deviation (px) of the position in the worst direction (module docs).
     pub sigma: f64,
+    /// Covariance (px², image axes) of the position, scaled like `sigma` (its larger
+    /// eigenvalue is `sigma²`).
+    pub cov: [[f64; 2]; 2],
     /// Tangent angles (radians) of the two edges at the corner.
     pub angles: [f64; 2],
     /// Curvatures (1/px) of the two edges at the corner, signed as in the module docs.
@@ -404,6 +407,7 @@ fn fit_junction(
     let (sxx, sxy, syy) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
     let worst = 0.5 * (sxx + syy) + (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
     let sigma = SIGMA_SCALE * (worst * variance).sqrt();
+    let scale = SIGMA_SCALE * SIGMA_SCALE * variance;
     let rms = (cost / pixels.len() as f64).sqrt();
     let contrast = 2.0 * p[NL + 3].abs();
     // A flat patch fits any geometry with a contrast near zero (and residuals near zero).
@@ -416,6 +420,7 @@ fn fit_junction(
     Some(JunctionCorner {
         point: q,
         sigma,
+        cov: [[scale * sxx, scale * sxy], [scale * sxy, scale * syy]],
         angles: [p[2], p[3]],
         curvatures: [p[4], p[5]],
         blur: w,

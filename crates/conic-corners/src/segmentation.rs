@@ -131,7 +131,11 @@ fn median_in_place(v: &mut [f64]) -> f64 {
     if odd {
         return upper;
     }
-    let lower = below.iter().copied().max_by(f64::total_cmp).unwrap_or(upper);
+    let lower = below
+        .iter()
+        .copied()
+        .max_by(f64::total_cmp)
+        .unwrap_or(upper);
     0.5 * (lower + upper)
 }
 

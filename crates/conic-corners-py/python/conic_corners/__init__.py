@@ -31,7 +31,8 @@ gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last reso
 :func:`detect` fits board-wide by default and falls back to the local refiner per corner where a grid
 line has too few samples, to the junction model where the local refiner fails or sees one side only
 (foreshortened squares at a silhouette), and to the gradient estimate where that fails too. A
-board-wide answer with less support than most of its board's is averaged with the junction model's.
+board-wide answer with less support than most of its board's, or a doubtful one, is combined with
+the junction model's by their inverse covariances where the two agree.
 
 Errors: a wrong dtype raises ``TypeError``; a wrong shape, an empty array, non-finite values or an
 out-of-range parameter raise ``ValueError``.
