@@ -12,9 +12,11 @@ use crate::election::{elect, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::prefilter::{prefilter, PrefilterParams};
+use crate::quadratic_form::worst_sigma;
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;
+use nalgebra::{Matrix2, Vector2};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -297,9 +299,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                             match junction_corner(image, &corners, b, i, c, j, false) {
                                 // Where they disagree, the one that claims the smaller σ.
                                 Some(jc) => fuse((c, cov), jc).unwrap_or_else(|| {
-                                    let sigma =
-                                        |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
-                                    if sigma(&jc.0) < sigma(&c) {
+                                    if sigma_of(&jc.0) < sigma_of(&c) {
                                         jc.0
                                     } else {
                                         c
@@ -378,9 +378,8 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {
                             return f;
                         }
-                        let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
                         let one_sided = last.status == Status::Fallback && board.is_none();
-                        return if one_sided && sigma(&last) <= sigma(&jc) {
+                        return if one_sided && sigma_of(&last) <= sigma_of(&jc) {
                             last
                         } else {
                             jc
@@ -405,8 +404,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {
                             return f;
                         }
-                        let sigma = |c: &DetectedCorner| c.sigma.unwrap_or(f64::INFINITY);
-                        if sigma(&jc) < sigma(&last) {
+                        if sigma_of(&jc) < sigma_of(&last) {
                             return jc;
                         }
                     }
@@ -430,9 +428,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     // A one-sided local answer against the gradient estimate: the one that
                     // claims the smaller σ.
                     (Some(gc), None)
-                        if last.status == Status::Fallback
-                            && last.sigma.unwrap_or(f64::INFINITY)
-                                <= gc.sigma.unwrap_or(f64::INFINITY) =>
+                        if last.status == Status::Fallback && sigma_of(&last) <= sigma_of(&gc) =>
                     {
                         last
                     }
@@ -558,6 +554,11 @@ fn fallback_at(c: DetectedCorner, point: [f64; 2], sigma: f64, path: Path) -> De
 /// most: curved, short or extrapolated lines) is combined with the junction model's answer.
 const JUNCTION_GATE: f64 = 1.5;
 
+/// A corner's σ, infinite where it has none (refinement failed).
+fn sigma_of(c: &DetectedCorner) -> f64 {
+    c.sigma.unwrap_or(f64::INFINITY)
+}
+
 /// A 2×2 covariance (px², image axes).
 type Cov = [[f64; 2]; 2];
 
@@ -568,43 +569,23 @@ type Cov = [[f64; 2]; 2];
 /// disagree: the Mahalanobis distance of their difference above the 99 % point of χ²₂, or a
 /// covariance that cannot be inverted.
 fn fuse((c, cc): (DetectedCorner, Cov), (j, cj): (DetectedCorner, Cov)) -> Option<DetectedCorner> {
-    let inv = |m: Cov| -> Option<Cov> {
-        let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-        (det > 0.0 && det.is_finite()).then(|| {
-            [
-                [m[1][1] / det, -m[0][1] / det],
-                [-m[1][0] / det, m[0][0] / det],
-            ]
-        })
-    };
-    let add = |a: Cov, b: Cov| {
-        [
-            [a[0][0] + b[0][0], a[0][1] + b[0][1]],
-            [a[1][0] + b[1][0], a[1][1] + b[1][1]],
-        ]
-    };
-    let mul = |m: Cov, v: [f64; 2]| {
-        [
-            m[0][0] * v[0] + m[0][1] * v[1],
-            m[1][0] * v[0] + m[1][1] * v[1],
-        ]
-    };
-    let d = [c.x - j.x, c.y - j.y];
-    let s = inv(add(cc, cj))?;
-    let md = mul(s, d);
-    if !(d[0] * md[0] + d[1] * md[1] <= CHI2_2_99) {
+    let m = |a: Cov| Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1]);
+    let (cc, cj) = (m(cc), m(cj));
+    let (pc, pj) = (Vector2::new(c.x, c.y), Vector2::new(j.x, j.y));
+    let d = pc - pj;
+    if !(d.dot(&((cc + cj).try_inverse()? * d)) <= CHI2_2_99) {
         return None;
     }
-    let (ic, ij) = (inv(cc)?, inv(cj)?);
-    let p = inv(add(ic, ij))?;
-    let (a, b) = (mul(ic, [c.x, c.y]), mul(ij, [j.x, j.y]));
-    let [x, y] = mul(p, [a[0] + b[0], a[1] + b[1]]);
-    let worst =
-        0.5 * (p[0][0] + p[1][1]) + (0.25 * (p[0][0] - p[1][1]).powi(2) + p[0][1] * p[1][0]).sqrt();
-    (x.is_finite() && y.is_finite()).then_some(DetectedCorner {
-        x,
-        y,
-        sigma: Some(worst.sqrt()),
+    let (ic, ij) = (cc.try_inverse()?, cj.try_inverse()?);
+    let p = (ic + ij).try_inverse()?;
+    let x = p * (ic * pc + ij * pj);
+    (x.iter().all(|v| v.is_finite())).then(|| DetectedCorner {
+        x: x[0],
+        y: x[1],
+        sigma: Some(worst_sigma([
+            [p[(0, 0)], p[(0, 1)]],
+            [p[(1, 0)], p[(1, 1)]],
+        ])),
         ..c
     })
 }
