@@ -389,18 +389,22 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// Candidates within 7 px of the border (the template would leave the image) are dropped.
 ///
 /// A coarse pass on the box-downsampled image adds the corners the fine tests reject on large
-/// squares (its stride from the grid step of the fine corners); when the fine pass elects too
-/// few corners to give a step (every junction bridged by a print's dot gain), passes at strides
-/// 2, 4 and 8 are tried and the one electing the most corners is kept.
+/// squares (its stride from the grid step of the fine corners); when the two passes elect fewer
+/// than nine corners together, or the fine pass too few to give a step (every junction bridged
+/// by a print's dot gain), passes at strides 2, 4 and 8 are tried and the one electing the most
+/// corners is kept.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
     let fine = elect_at_one_scale(image, candidates, params);
-    let (stride, mut all) = match coarse_stride(&fine) {
-        Some(stride) => (stride, elect_coarse(image, stride, stride, params)),
-        // Too few fine corners to measure the grid step: every junction can fail the fine tests
-        // at once (a print's dot gain joins the dark squares by a bridge a few pixels wide, and
-        // the centre test rejects them all). The coarse scale that elects the most corners is
-        // taken, the finest on a tie.
-        None if fine.len() < MIN_FINE_CORNERS => FALLBACK_STRIDES
+    // With few fine corners the grid step they give may be off by squares (every junction can
+    // fail the fine tests at once: a print's dot gain joins the dark squares by a bridge a few
+    // pixels wide, and the centre test rejects them all but a few, far apart). If the coarse pass
+    // at that step finds too few corners too, or there is no step, the coarse scale that elects
+    // the most corners is taken, the finest on a tie.
+    let measured =
+        coarse_stride(&fine).map(|stride| (stride, elect_coarse(image, stride, stride, params)));
+    let (stride, mut all) = match measured {
+        Some((stride, coarse)) if fine.len() + coarse.len() >= MIN_FINE_CORNERS => (stride, coarse),
+        _ if fine.len() < MIN_FINE_CORNERS => FALLBACK_STRIDES
             .iter()
             .map(|&stride| {
                 (
@@ -415,6 +419,7 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
                     best
                 }
             }),
+        Some((stride, coarse)) => (stride, coarse),
         None => return fine,
     };
     // A corner found at both scales keeps its fine position (better than a coarse pixel); the
@@ -427,8 +432,8 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     deduplicate(all, params.min_distance)
 }
 
-/// With fewer fine corners than a 3 × 3 patch of a board, and no grid step measured from them,
-/// the coarse passes of [`FALLBACK_STRIDES`] are tried.
+/// With fewer fine and coarse corners than a 3 × 3 patch of a board, the coarse passes of
+/// [`FALLBACK_STRIDES`] are tried.
 const MIN_FINE_CORNERS: usize = 9;
 /// Strides of the coarse passes tried when the fine pass elects too few corners.
 const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
