@@ -302,7 +302,7 @@ fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: 
     }
     let corners = board
         .corners
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(i, c)| {
             let local = |why| local_corner(c.row, c.col, [c.x, c.y], why, params);
