@@ -51,6 +51,7 @@
 //!
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
+use crate::quadratic_form::worst_sigma;
 use crate::GrayImage;
 use nalgebra::{SMatrix, SVector};
 
@@ -403,11 +404,11 @@ fn fit_junction(
     let fitted = if sliver.is_some() { NP } else { NP - 1 };
     let dof = pixels.len().checked_sub(fitted).filter(|&d| d > 0)? as f64;
     let variance = cost / dof;
-    let cov = jtj.try_inverse()?;
-    let (sxx, sxy, syy) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
-    let worst = 0.5 * (sxx + syy) + (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
-    let sigma = SIGMA_SCALE * (worst * variance).sqrt();
+    let inverse = jtj.try_inverse()?;
     let scale = SIGMA_SCALE * SIGMA_SCALE * variance;
+    let (sxx, sxy, syy) = (inverse[(0, 0)], inverse[(0, 1)], inverse[(1, 1)]);
+    let cov = [[scale * sxx, scale * sxy], [scale * sxy, scale * syy]];
+    let sigma = worst_sigma(cov);
     let rms = (cost / pixels.len() as f64).sqrt();
     let contrast = 2.0 * p[NL + 3].abs();
     // A flat patch fits any geometry with a contrast near zero (and residuals near zero).
@@ -420,7 +421,7 @@ fn fit_junction(
     Some(JunctionCorner {
         point: q,
         sigma,
-        cov: [[scale * sxx, scale * sxy], [scale * sxy, scale * syy]],
+        cov,
         angles: [p[2], p[3]],
         curvatures: [p[4], p[5]],
         blur: w,
