@@ -383,7 +383,9 @@ fn a_board_whose_junctions_are_all_bridged_is_found() {
     // A 0.3 mm dot gain on an S-shaped board: the fine election rejects all but four bridged
     // junctions, squares apart, and the coarse pass at the grid step they give (stride 16)
     // elects none; the fallback strides find the board.
-    let s = scene(Surface::SShape { radius_mm: 80.0 }, 704, |t| t.dot_gain_mm = 0.3);
+    let s = scene(Surface::SShape { radius_mm: 80.0 }, 704, |t| {
+        t.dot_gain_mm = 0.3
+    });
     let (o, det) = run("bridged junctions", &s, 4);
     eprintln!("{} missing, RMS {:.4} px", o.missing, o.rms);
     assert_eq!(det.boards.len(), 1);
