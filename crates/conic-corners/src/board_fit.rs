@@ -1234,6 +1234,7 @@ fn choose_segment(
     });
     let mut best: Option<(Chosen, bool, f64)> = None;
     let (mut enough, mut scratch) = (false, Vec::new());
+    let mut previous = None;
     for (seg, reach) in candidates.flat_map(|s| [(s, support), (s, NARROW_SUPPORT * support)]) {
         let (a, b) = seg.samples;
         let inside = |i: &usize| dist(line.samples[*i], p) <= reach;
@@ -1241,6 +1242,10 @@ fn choose_segment(
             continue;
         };
         if hi + 1 - lo < min_near {
+            continue;
+        }
+        // A short piece lies within both windows: its fit would be the same twice.
+        if previous.replace((lo, hi)) == Some((lo, hi)) {
             continue;
         }
         enough = true;
