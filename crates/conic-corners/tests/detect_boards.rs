@@ -393,6 +393,45 @@ fn a_board_whose_junctions_are_all_bridged_is_found() {
     assert!(o.rms < RMS_BOUND, "{}", o.rms);
 }
 
+#[test]
+fn corners_no_refiner_can_place_are_dropped() {
+    // A bar's edge passes through the outer corner of a border square: the completion's
+    // quadrant test takes it for a junction, but no refiner can place it (two of its four
+    // edges are the bar's). Kept, it would be labelled as the board's next corner, 90 px from
+    // every true one.
+    let mut s = scene(Surface::Flat, 903, |_| ());
+    s.occluders = vec![Occluder {
+        from: [700.0, 0.0],
+        to: [1200.0, 1200.0],
+        width: 40.0,
+        intensity: 0.3,
+    }];
+    let r = s.render(3).expect("valid scene");
+    let kept = detect(
+        &r.image,
+        &DetectParams {
+            keep_unrefined: true,
+            ..DetectParams::default()
+        },
+    );
+    let unplaced: Vec<_> = kept
+        .boards
+        .iter()
+        .flat_map(|b| &b.corners)
+        .filter(|c| c.status == Status::Failed)
+        .collect();
+    assert_eq!(unplaced.len(), 1, "{unplaced:?}");
+    let det = detect(&r.image, &DetectParams::default());
+    let o = check("stroke through an outer corner", &det, &r.corners);
+    assert_eq!(o.missing, 0);
+    assert_eq!(det.boards.len(), 1);
+    let b = &det.boards[0];
+    assert_eq!(b.corners.len() + 1, kept.boards[0].corners.len());
+    assert_eq!(b.corners.iter().map(|c| c.row).min(), Some(0));
+    assert_eq!(b.corners.iter().map(|c| c.col).min(), Some(0));
+    assert!(b.corners.iter().all(|c| c.status != Status::Failed));
+}
+
 /// Detection across imaging conditions, as a table (not a pass/fail test):
 /// `cargo test --release -p conic-corners --test detect_boards robustness_report -- --ignored
 /// --nocapture`. Six random poses per cell, 9×9 corners on 20 mm squares (about 90–140 px)

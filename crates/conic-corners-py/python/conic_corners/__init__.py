@@ -85,8 +85,8 @@ class Board:
         points: N×2 ``float64`` subpixel positions, x then y (pixel centres at integers).
         ids: N×2 ``int32`` grid labels, row then col, in the order of ``points``.
         scores: N ``float64`` template-matching scores (normalized cross-correlation).
-        status: N ``uint8`` status codes (:data:`FAILED`, :data:`FALLBACK`, :data:`CONVERGED`);
-            a failed corner keeps its pixel-level position.
+        status: N ``uint8`` status codes (:data:`FALLBACK`, :data:`CONVERGED`); a corner that
+            no refiner could place (:data:`FAILED`) is not reported: such corners were false ones.
         residuals: N ``float64`` RMS distances (px) of the edge samples to their fitted curves,
             NaN where the corner was not refined.
         paths: N ``uint8`` path codes: :data:`PATH_BOARD` where the corner is the intersection
