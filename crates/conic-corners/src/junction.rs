@@ -249,8 +249,9 @@ const WIDEN_MIN_PX: f64 = 0.5;
 /// disagrees). The two fits share the first one's pixels, so where the model holds their
 /// positions differ by about `√(σ₁² − σ₂²)` (nested estimates); the wide answer is kept if they
 /// differ by at most three times that (at least `σ₁/4`). On the curved-board benchmark (32²
-/// sub-samples) the top curvature bin went from 0.0176 to 0.0162 px. The wide fit costs 16 ms
-/// on `curve_6.jpg` (one thread); at 16 px it gave the same bin (0.0163 px) for 26 ms more.
+/// sub-samples) the top curvature bin went from 0.0176 to 0.0162 px. The wide fit cost 16 ms
+/// on `curve_6.jpg` (one thread, with the C library's `exp` and 12 quadrature nodes); at 16 px
+/// it gave the same bin (0.0163 px) for 26 ms more.
 pub fn refine_junction_at_boundary(
     image: &GrayImage,
     start: [f64; 2],
