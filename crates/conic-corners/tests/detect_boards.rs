@@ -311,7 +311,12 @@ fn real_photos_when_present() {
     ];
     for (name, at_least) in expected {
         let image = GrayImage::open(dir.join(name)).expect("readable photo");
-        let det = detect(&image, &DetectParams::default());
+        // Unplaced corners kept, so that the test below can see them.
+        let keep = DetectParams {
+            keep_unrefined: true,
+            ..DetectParams::default()
+        };
+        let det = detect(&image, &keep);
         let n: usize = det.boards.iter().map(|b| b.corners.len()).sum();
         eprintln!("{name}: {} boards, {n} corners", det.boards.len());
         assert!(n >= at_least, "{name}: {n} corners, expected ≥ {at_least}");
