@@ -21,7 +21,7 @@
 //!    there until the edge ends. The blur σ is measured by a pilot walk over a few segments.
 //!    The offset between the line's two polarities (a print's dot gain moves every edge towards
 //!    its light side, so consecutive segments are offset across the line) is measured at the
-//!    corners and removed (`remove_polarity_offset`), which puts every corner at the centre of its
+//!    corners and removed (`apply_polarity`), which puts every corner at the centre of its
 //!    junction.
 //! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
 //! 3. **Fitting** (III-F): [`fit_edge_curve_with`] per piece, its fold-back guard only near the
@@ -287,10 +287,21 @@ fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: 
         .unwrap_or(1.5)
         .clamp(0.5, 12.0);
     let cfg = WalkConfig::new(sigma, params.stride.max(1));
-    let lines: Vec<(FittedLine, Vec<(usize, usize)>)> = grid
+    let chains: Vec<Chain> = grid
         .lines
         .par_iter()
-        .map(|line| sample_and_fit_line(image, &grid, line, &cfg, params, whole_pieces))
+        .map(|line| sample_line(image, &grid, line, &cfg, params))
+        .collect();
+    let measured: Vec<Polarity> = chains
+        .iter()
+        .map(|(pts, cuts)| measure_polarity(pts, cuts))
+        .collect();
+    let fallbacks = polarity_fallbacks(board, &grid, &measured);
+    let lines: Vec<(FittedLine, Vec<(usize, usize)>)> = chains
+        .into_par_iter()
+        .zip(&grid.lines)
+        .zip(measured.par_iter().zip(&fallbacks))
+        .map(|((chain, line), (m, &f))| finish_line(line, chain, m, f, params, whole_pieces))
         .collect();
     // For each corner, its position in each of its two lines: (line, samples before it).
     let mut slots: Vec<[Option<(usize, usize)>; 2]> = vec![[None, None]; board.corners.len()];
@@ -852,14 +863,17 @@ fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
 
 /// Samples one line, segments its chain, fits every piece (for drawing). Returns the line and
 /// the chain position of each corner: `(corner, samples before it)`.
-fn sample_and_fit_line(
+/// A line's edge samples in chain order, and for each of its corners the number of samples
+/// before it.
+type Chain = (Vec<[f64; 2]>, Vec<(usize, usize)>);
+
+fn sample_line(
     image: &GrayImage,
     grid: &Grid,
     line: &GridLine,
     cfg: &WalkConfig,
     params: &BoardFitParams,
-    whole_pieces: bool,
-) -> (FittedLine, Vec<(usize, usize)>) {
+) -> Chain {
     let k = usize::from(line.kind == LineKind::Column);
     let cs = &line.corners;
     let mut pts: Vec<[f64; 2]> = Vec::new();
@@ -899,7 +913,20 @@ fn sample_and_fit_line(
             }
         }
     }
-    let offset = remove_polarity_offset(&mut pts, &cuts);
+    (pts, cuts)
+}
+
+/// Removes the polarity offset from a sampled line ([`apply_polarity`], `fallback` where its
+/// own is not significant), segments it and, with `whole_pieces`, fits each piece.
+fn finish_line(
+    line: &GridLine,
+    (mut pts, cuts): Chain,
+    measured: &Polarity,
+    fallback: Option<f64>,
+    params: &BoardFitParams,
+    whole_pieces: bool,
+) -> (FittedLine, Vec<(usize, usize)>) {
+    let offset = apply_polarity(&mut pts, &cuts, measured, fallback);
     let ranges = segment_chain(&pts, &params.segmentation);
     let mut scratch = Vec::new();
     let mut segments = Vec::with_capacity(ranges.len());
@@ -926,11 +953,117 @@ fn sample_and_fit_line(
     )
 }
 
+/// For each line whose own polarity offset is not significant (too few corners, or a short
+/// run of a line broken by missing corners), the offset of the nearest lines of its kind (by
+/// index) that measured one, if any did and if most lines that could test their offset found
+/// it significant; `None` for the others. A print's dot gain is one
+/// property of the whole board, but a line's sign depends on which polarity its first segment
+/// has: `D` times `(−1)^(row + col)` of the line's first corner is the same for every line of a
+/// kind, and carried over that way. The nearest lines, not the board's median, because the
+/// offset in px follows the foreshortening (on a 0.3 mm dot-gain render from 2.8 px on one
+/// side of a board to 5.2 px on the other).
+fn polarity_fallbacks(board: &Board, grid: &Grid, measured: &[Polarity]) -> Vec<Option<f64>> {
+    // Only on a print whose offset shows on most of the lines that can test it: on a clean
+    // print one or two outer lines may pass the test by a few hundredths of a pixel.
+    let testable = measured.iter().filter(|m| m.testable).count();
+    let significant = measured.iter().filter(|m| m.offset.is_some()).count();
+    if 2 * significant <= testable {
+        return vec![None; measured.len()];
+    }
+    let parity = |line: &GridLine| {
+        let c = &board.corners[line.corners[0]];
+        if (c.row + c.col).rem_euclid(2) == 0 {
+            1.0
+        } else {
+            -1.0
+        }
+    };
+    grid.lines
+        .iter()
+        .zip(measured)
+        .map(|(line, m)| {
+            if m.offset().is_some() {
+                return None;
+            }
+            let donors = || {
+                grid.lines
+                    .iter()
+                    .zip(measured)
+                    .filter(|(l, _)| l.kind == line.kind)
+                    .filter_map(|(l, m)| {
+                        Some((l.index.abs_diff(line.index), m.offset()? * parity(l)))
+                    })
+            };
+            let nearest = donors().map(|(d, _)| d).min()?;
+            let (sum, n) = donors()
+                .filter(|&(d, _)| d == nearest)
+                .fold((0.0, 0.0), |(s, n), (_, v)| (s + v, n + 1.0));
+            Some(sum / n * parity(line))
+        })
+        .collect()
+}
+
 /// Samples on each side of a corner that measure the chain's jump there.
 const JUMP_SAMPLES: usize = 12;
 
 /// Samples on each side whose chord gives the local normal when a sample is moved.
 const NORMAL_SPAN: usize = 4;
+
+/// The polarity jumps of one line, measured at its corners (see [`apply_polarity`]).
+struct Polarity {
+    /// `Dⱼ` at each corner, `None` where a side has no samples.
+    local: Vec<Option<f64>>,
+    /// Their median `D` and MAD, if `D` is significant.
+    offset: Option<(f64, f64)>,
+    /// Whether enough jumps were measured to test `D` (at least three).
+    testable: bool,
+}
+
+impl Polarity {
+    /// The line's offset `D`, if significant.
+    fn offset(&self) -> Option<f64> {
+        self.offset.map(|(d, _)| d)
+    }
+}
+
+/// The jumps `Dⱼ` of [`apply_polarity`] and their median, if significant (at least three
+/// measured, the median above three standard errors).
+fn measure_polarity(pts: &[[f64; 2]], cuts: &[(usize, usize)]) -> Polarity {
+    let local: Vec<Option<f64>> = cuts
+        .iter()
+        .enumerate()
+        .map(|(j, &(_, cut))| {
+            // Only the samples of the corner's own two squares: where a square's walk found
+            // nothing, the next samples are of the square beyond, of the same polarity.
+            let prev = j.checked_sub(1).map_or(0, |i| cuts[i].1).min(cut);
+            let next = cuts.get(j + 1).map_or(pts.len(), |c| c.1).max(cut);
+            let before = &pts[cut.saturating_sub(JUMP_SAMPLES).max(prev)..cut];
+            let after = &pts[cut..(cut + JUMP_SAMPLES).min(next)];
+            edge_jump(before.iter().copied(), after.iter().copied()).map(|e| {
+                if j % 2 == 0 {
+                    -e.jump
+                } else {
+                    e.jump
+                }
+            })
+        })
+        .collect();
+    let mut all: Vec<f64> = local.iter().flatten().copied().collect();
+    let testable = all.len() >= 3;
+    let offset = testable
+        .then(|| {
+            let n = all.len() as f64;
+            let (offset, mad) = median_mad_in_place(&mut all);
+            let se = 1.4826 * mad * (std::f64::consts::FRAC_PI_2 / n).sqrt();
+            (offset.abs() > 3.0 * se).then_some((offset, mad))
+        })
+        .flatten();
+    Polarity {
+        local,
+        offset,
+        testable,
+    }
+}
 
 /// Estimates and removes the offset between the two polarities of a grid line, returning its
 /// median over the line (px; 0 when it is not significant and nothing was moved).
@@ -954,39 +1087,28 @@ const NORMAL_SPAN: usize = 4;
 /// (samples between corners `k − 1` and `k`) is shifted by `−(−1)ᵏ D/2` along the unit normal of
 /// the chain (the chord over a few neighbouring samples), `D` interpolated linearly between its two
 /// corners. `cuts` holds the chain position of every corner, in order.
-fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 {
-    let local: Vec<Option<f64>> = cuts
-        .iter()
-        .enumerate()
-        .map(|(j, &(_, cut))| {
-            // Only the samples of the corner's own two squares: where a square's walk found
-            // nothing, the next samples are of the square beyond, of the same polarity.
-            let prev = j.checked_sub(1).map_or(0, |i| cuts[i].1).min(cut);
-            let next = cuts.get(j + 1).map_or(pts.len(), |c| c.1).max(cut);
-            let before = &pts[cut.saturating_sub(JUMP_SAMPLES).max(prev)..cut];
-            let after = &pts[cut..(cut + JUMP_SAMPLES).min(next)];
-            edge_jump(before.iter().copied(), after.iter().copied()).map(|e| {
-                if j % 2 == 0 {
-                    -e.jump
-                } else {
-                    e.jump
-                }
-            })
-        })
-        .collect();
-    let mut all: Vec<f64> = local.iter().flatten().copied().collect();
-    if all.len() < 3 {
+///
+/// The jumps are measured by [`measure_polarity`]. A line whose own offset is not significant
+/// takes `fallback` when given (the offset its neighbouring lines measured, signed for this
+/// line: [`polarity_fallbacks`]), with its own jumps where they agree with it within a quarter
+/// of it (at least 0.5 px).
+fn apply_polarity(
+    pts: &mut [[f64; 2]],
+    cuts: &[(usize, usize)],
+    measured: &Polarity,
+    fallback: Option<f64>,
+) -> f64 {
+    let local = &measured.local;
+    let (offset, limit) = match (measured.offset, fallback) {
+        // A jump far from the line's median is not dot gain but a stray sample run (a pen
+        // stroke through the junction, a corner placed off its junction): it takes the median.
+        (Some((offset, mad)), _) => (offset, (4.0 * 1.4826 * mad).max(0.5)),
+        (None, Some(f)) if f.is_finite() && f != 0.0 => (f, (0.25 * f.abs()).max(0.5)),
+        _ => return 0.0,
+    };
+    if cuts.is_empty() {
         return 0.0;
     }
-    let n = all.len() as f64;
-    let (offset, mad) = median_mad_in_place(&mut all);
-    let se = 1.4826 * mad * (std::f64::consts::FRAC_PI_2 / n).sqrt();
-    if offset.abs() <= 3.0 * se {
-        return 0.0;
-    }
-    // A jump far from the line's median is not dot gain but a stray sample run (a pen stroke
-    // through the junction, a corner placed off its junction): it takes the median.
-    let limit = (4.0 * 1.4826 * mad).max(0.5);
     let at = |j: usize| {
         local[j]
             .filter(|d| (d - offset).abs() <= limit)
@@ -1616,6 +1738,11 @@ mod tests {
         assert_eq!(fit(&[]).polarity_offset(), 0.0);
     }
 
+    fn remove_polarity_offset(pts: &mut [[f64; 2]], cuts: &[(usize, usize)]) -> f64 {
+        let measured = measure_polarity(pts, cuts);
+        apply_polarity(pts, cuts, &measured, None)
+    }
+
     #[test]
     fn polarity_offset_ignores_stray_jumps() {
         // A straight line along x: 12 segments of 20 samples, each polarity 0.8 px off the line
@@ -1640,6 +1767,74 @@ mod tests {
                 assert!(p[1].abs() < 0.05, "sample {i}: {p:?}");
             }
         }
+    }
+
+    #[test]
+    fn short_lines_take_their_neighbours_polarity_offset() {
+        // Rows 0 and 1 have four corners, row 2 only two (one segment: no jump to measure).
+        // With dot gain the rows' offsets alternate in sign with the parity of their first
+        // corner, (−1)^(row + col) times one value; row 2 takes that of its nearest row,
+        // signed for its own first corner.
+        let mut labels: Vec<(i32, i32)> =
+            (0..2).flat_map(|r| (0..4).map(move |c| (r, c))).collect();
+        labels.extend([(2, 0), (2, 1)]);
+        let board = Board {
+            rows: 3,
+            cols: 4,
+            corners: labels
+                .iter()
+                .map(|&(row, col)| DetectedCorner {
+                    x: 10.0 * col as f64,
+                    y: 10.0 * row as f64,
+                    row,
+                    col,
+                    score: 1.0,
+                    status: Status::Converged,
+                    residual: None,
+                    path: Path::Local,
+                    sigma: None,
+                })
+                .collect(),
+        };
+        let grid = Grid::new(&board);
+        let polarity = |line: &GridLine, print: &dyn Fn(&GridLine) -> Option<f64>| {
+            let offset = print(line).map(|d| (d, 0.1));
+            Polarity {
+                local: vec![None; line.corners.len()],
+                offset,
+                testable: line.corners.len() >= 3,
+            }
+        };
+        let sign = |l: &GridLine| {
+            let c = &board.corners[l.corners[0]];
+            if (c.row + c.col) % 2 == 0 {
+                1.0
+            } else {
+                -1.0
+            }
+        };
+        let gained = |l: &GridLine| {
+            (l.corners.len() >= 3).then(|| match l.kind {
+                LineKind::Row => -2.0 * sign(l),
+                LineKind::Column => 1.5 * sign(l),
+            })
+        };
+        let measured: Vec<Polarity> = grid.lines.iter().map(|l| polarity(l, &gained)).collect();
+        let fallbacks = polarity_fallbacks(&board, &grid, &measured);
+        for (l, f) in grid.lines.iter().zip(&fallbacks) {
+            let expected = match (l.kind, l.index, l.corners.len()) {
+                (LineKind::Row, 2, _) => Some(-2.0),
+                (LineKind::Column, _, n) if n < 3 => Some(1.5 * sign(l)),
+                _ => None,
+            };
+            assert_eq!(*f, expected, "{:?} {}", l.kind, l.index);
+        }
+        // A clean print: one line passes the test by chance, nothing is carried over.
+        let clean = |l: &GridLine| (l.kind == LineKind::Row && l.index == 0).then_some(0.03);
+        let measured: Vec<Polarity> = grid.lines.iter().map(|l| polarity(l, &clean)).collect();
+        assert!(polarity_fallbacks(&board, &grid, &measured)
+            .iter()
+            .all(Option::is_none));
     }
 
     #[test]
