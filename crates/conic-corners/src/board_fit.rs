@@ -22,7 +22,7 @@
 //!    The offset between the line's two polarities (a print's dot gain moves every edge towards
 //!    its light side, so consecutive segments are offset across the line) is measured at the
 //!    corners and removed (`apply_polarity`), which puts every corner at the centre of its
-//!    junction.
+//!    junction; a line too short to measure it takes its neighbours' (`polarity_fallbacks`).
 //! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
 //! 3. **Fitting** (III-F): [`fit_edge_curve_with`] per piece, its fold-back guard only near the
 //!    corner ([`BranchGuard::Near`]), with samples farther than 3.5 robust standard deviations
