@@ -37,7 +37,7 @@
 //! linear ones) are fitted by Levenberg–Marquardt with analytic derivatives
 //! (`∂Φ₂/∂h = φ(h) Φ((k − ρh)/√(1 − ρ²))`, `∂Φ₂/∂ρ = φ₂(h, k; ρ)`), the integral by
 //! Gauss–Legendre quadrature of 4 to 12 points by the angle between the edges (exact to 3·10⁻⁸
-//! for edges at least 12° apart, [`GL_RULES`]). A fit is refused
+//! for edges at least 12° apart, `GL_RULES`). A fit is refused
 //! when the contrast is below ten times the residuals' RMS (no junction in the window).
 //!
 //! **Window.** The pixels within `radius` of the start, which the caller bounds by the distance
