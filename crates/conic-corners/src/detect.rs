@@ -464,11 +464,14 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             cols: b.cols,
             corners: refined,
         };
-        if !params.keep_unrefined {
-            drop_unrefined(&mut board);
-        }
-        if !board.corners.is_empty() {
+        // What is left of a board after dropping must still be one (`labels.min_corners`).
+        if params.keep_unrefined {
             boards.push(board);
+        } else {
+            drop_unrefined(&mut board);
+            if board.corners.len() >= params.labels.min_corners.max(1) {
+                boards.push(board);
+            }
         }
     }
     Detection {
@@ -775,6 +778,42 @@ mod tests {
         )
         .is_none());
         assert!(fuse((at(10.0, 20.02, 0.1), [[0.0, 0.0], [0.0, 0.01]]), junction).is_none());
+    }
+
+    #[test]
+    fn dropping_unplaced_corners_keeps_labels_canonical() {
+        let corner = |row, col, status| DetectedCorner {
+            x: col as f64,
+            y: row as f64,
+            row,
+            col,
+            score: 1.0,
+            status,
+            residual: None,
+            path: Path::Local,
+            sigma: None,
+        };
+        let mut board = Board {
+            rows: 3,
+            cols: 3,
+            corners: vec![
+                corner(0, 0, Status::Failed),
+                corner(1, 1, Status::Converged),
+                corner(1, 2, Status::Fallback),
+                corner(2, 1, Status::Converged),
+                corner(2, 2, Status::Failed),
+            ],
+        };
+        drop_unrefined(&mut board);
+        let labels: Vec<(i32, i32)> = board.corners.iter().map(|c| (c.row, c.col)).collect();
+        assert_eq!(labels, [(0, 0), (0, 1), (1, 0)]);
+        assert_eq!((board.rows, board.cols), (2, 2));
+        board.corners[0].status = Status::Failed;
+        board.corners[1].status = Status::Failed;
+        board.corners[2].status = Status::Failed;
+        drop_unrefined(&mut board);
+        assert!(board.corners.is_empty());
+        assert_eq!((board.rows, board.cols), (0, 0));
     }
 
     #[test]
