@@ -861,12 +861,12 @@ fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
     blur_sigma_from_widths(&widths)
 }
 
-/// Samples one line, segments its chain, fits every piece (for drawing). Returns the line and
-/// the chain position of each corner: `(corner, samples before it)`.
-/// A line's edge samples in chain order, and for each of its corners the number of samples
-/// before it.
+/// A line's edge samples in chain order, and the chain position of each of its corners:
+/// `(corner, samples before it)`.
 type Chain = (Vec<[f64; 2]>, Vec<(usize, usize)>);
 
+/// Samples one line: the edge walks between its consecutive corners, with poor profile fits
+/// dropped, and (with `params.extend`) beyond its first and last corner.
 fn sample_line(
     image: &GrayImage,
     grid: &Grid,
@@ -1065,8 +1065,9 @@ fn measure_polarity(pts: &[[f64; 2]], cuts: &[(usize, usize)]) -> Polarity {
     }
 }
 
-/// Estimates and removes the offset between the two polarities of a grid line, returning its
-/// median over the line (px; 0 when it is not significant and nothing was moved).
+/// Removes the offset between the two polarities of a grid line, returning the offset used:
+/// the line's median (px; 0 when it is not significant, there is no fallback, and nothing was
+/// moved).
 ///
 /// Along a grid line the dark square lies on alternate sides from one corner to the next. A print
 /// with dot gain (dark squares grown by `g`) moves every edge towards its light side, so the
