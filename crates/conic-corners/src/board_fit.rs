@@ -978,21 +978,26 @@ fn polarity_fallbacks(board: &Board, grid: &Grid, measured: &[Polarity]) -> Vec<
             -1.0
         }
     };
-    grid.lines
+    // Each measured line's offset times its parity: one value per kind of line.
+    let signed: Vec<Option<f64>> = grid
+        .lines
         .iter()
         .zip(measured)
-        .map(|(line, m)| {
-            if m.offset().is_some() {
+        .map(|(l, m)| Some(m.offset()? * parity(l)))
+        .collect();
+    grid.lines
+        .iter()
+        .zip(&signed)
+        .map(|(line, own)| {
+            if own.is_some() {
                 return None;
             }
             let donors = || {
                 grid.lines
                     .iter()
-                    .zip(measured)
+                    .zip(&signed)
                     .filter(|(l, _)| l.kind == line.kind)
-                    .filter_map(|(l, m)| {
-                        Some((l.index.abs_diff(line.index), m.offset()? * parity(l)))
-                    })
+                    .filter_map(|(l, v)| Some((l.index.abs_diff(line.index), (*v)?)))
             };
             let nearest = donors().map(|(d, _)| d).min()?;
             let (sum, n) = donors()
