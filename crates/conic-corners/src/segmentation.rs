@@ -201,6 +201,9 @@ pub fn second_difference_splits(points: &[[f64; 2]], params: &SegmentationParams
 /// curvature. Points with no usable offset (the ends, coincident points) get `[0, 0]`.
 pub fn ancf(points: &[[f64; 2]], max_offset: usize) -> Vec<[f64; 2]> {
     let half = (max_offset as f64 / 2.0).max(0.5);
+    let omega: Vec<f64> = (0..=max_offset)
+        .map(|d| 1.0 - (-0.5 * (d as f64 / half).powi(2)).exp())
+        .collect();
     (0..points.len())
         .map(|i| {
             let (mut acc, mut wsum) = ([0.0, 0.0], 0.0);
@@ -209,23 +212,25 @@ pub fn ancf(points: &[[f64; 2]], max_offset: usize) -> Vec<[f64; 2]> {
                 let (p, q, r) = (points[i - d], points[i], points[i + d]);
                 let c = [r[0] - p[0], r[1] - p[1]];
                 let a = [q[0] - p[0], q[1] - p[1]];
-                let (lc, la, lb) = (
-                    c[0].hypot(c[1]),
-                    a[0].hypot(a[1]),
-                    (r[0] - q[0]).hypot(r[1] - q[1]),
+                let b = [r[0] - q[0], r[1] - q[1]];
+                // Squared lengths: image coordinates cannot overflow, and one square root per
+                // term instead of three `hypot`s is most of this function's time.
+                let (lc2, la2, lb2) = (
+                    c[0] * c[0] + c[1] * c[1],
+                    a[0] * a[0] + a[1] * a[1],
+                    b[0] * b[0] + b[1] * b[1],
                 );
-                if !(lc > 0.0 && la > 0.0 && lb > 0.0) {
+                if !(lc2 > 0.0 && la2 > 0.0 && lb2 > 0.0) {
                     continue;
                 }
                 let cross = c[0] * a[1] - c[1] * a[0];
                 // Left normal of c is (−c_y, c_x)/|c|; P_i is on the left when cross > 0, so the
-                // inner normal points right then.
+                // inner normal points right then. κ n = 2 |c × a| / (|a| |b| |c|) · n.
                 let s = if cross > 0.0 { -1.0 } else { 1.0 };
-                let n = [-c[1] / lc * s, c[0] / lc * s];
-                let kappa = 2.0 * cross.abs() / (la * lb * lc);
-                let w = 1.0 - (-0.5 * (d as f64 / half).powi(2)).exp();
-                acc[0] += w * kappa * n[0];
-                acc[1] += w * kappa * n[1];
+                let k = 2.0 * cross.abs() * s / ((la2 * lb2).sqrt() * lc2);
+                let w = omega[d];
+                acc[0] -= w * k * c[1];
+                acc[1] += w * k * c[0];
                 wsum += w;
             }
             if wsum > 0.0 {
