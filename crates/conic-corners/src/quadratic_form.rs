@@ -641,10 +641,12 @@ fn real_cubic_roots(c3: f64, c2: f64, c1: f64, c0: f64) -> ([f64; 3], usize) {
 /// Points per block in [`sampson_normal`]: the per-point work is written over fixed-size lane
 /// arrays so that the compiler can vectorize it (four `f64` lanes fill an AVX2 register).
 const LANES: usize = 4;
+/// Points per block of [`sampson_normal`]'s sums (a multiple of [`LANES`]).
+const BLOCK: usize = 4 * LANES;
 
 /// The points of a fit with positive weight in its edge frame (`u` along the tangent, `v` along
 /// the normal, both divided by the scale), with their weights multiplied by `wn`; the tail is
-/// padded to a multiple of [`LANES`] with zero-weight points at the origin. Mapped once per fit,
+/// padded to a multiple of [`BLOCK`] with zero-weight points at the origin. Mapped once per fit,
 /// since every Gauss–Newton pass reads them.
 struct FramePoints {
     u: Vec<f64>,
@@ -662,7 +664,7 @@ impl FramePoints {
         inv_scale: f64,
         wn: f64,
     ) -> Self {
-        let cap = fr.count.div_ceil(LANES) * LANES;
+        let cap = fr.count.div_ceil(BLOCK) * BLOCK;
         let (mut u, mut v, mut w) = (
             Vec::with_capacity(cap),
             Vec::with_capacity(cap),
@@ -729,20 +731,21 @@ fn sampson_normal_generic<const FUSED: bool>(
     let fma = |a: f64, b: f64, c: f64| if FUSED { a.mul_add(b, c) } else { a * b + c };
     let [a, b, c, d, e] = *theta;
     // Per-lane partial sums: cost, Σ w r J, then the upper triangle of Σ w J Jᵀ row by row.
-    // Every step is a loop over the lanes of one block, which the compiler turns into vector
-    // instructions (a loop over the lanes around the whole per-point body stays scalar).
+    // The residuals and Jacobians of a block of points are computed first, lane by lane (a
+    // loop over the lanes around the whole per-point body stays scalar), and each sum then
+    // gathers the block in registers: 21 running sums of a lane each do not fit in the vector
+    // registers, and updating them in memory for every lane group took most of the time.
     let mut acc = [[0.0; LANES]; 21];
-    let mut singular = [0.0; LANES];
+    let mut singular = [0.0; BLOCK];
     let blocks = pts
         .u
-        .chunks_exact(LANES)
-        .zip(pts.v.chunks_exact(LANES))
-        .zip(pts.w.chunks_exact(LANES));
+        .chunks_exact(BLOCK)
+        .zip(pts.v.chunks_exact(BLOCK))
+        .zip(pts.w.chunks_exact(BLOCK));
     for ((u, v), w) in blocks {
-        let mut j = [[0.0; LANES]; 5];
-        let mut wr = [0.0; LANES];
-        let mut wv = [0.0; LANES];
-        for l in 0..LANES {
+        // Rows: J₀…J₄, then r, then w.
+        let mut q = [[0.0; BLOCK]; 7];
+        for l in 0..BLOCK {
             let (u, v) = (u[l], v[l]);
             let f = fma(u, fma(a, u, fma(b, v, d)), fma(v, fma(c, v, -1.0), e));
             let fx = fma(2.0 * a, u, fma(b, v, d));
@@ -754,26 +757,32 @@ fn sampson_normal_generic<const FUSED: bool>(
             let r = f * ig;
             // ∂r/∂θ = (∂F/∂θ − r ∂|∇F|/∂θ) / |∇F|, with |∇F| ∂|∇F|/∂θ = F_x ∂F_x/∂θ + F_y ∂F_y/∂θ.
             let k = r * ig;
-            j[0][l] = fma(-k * 2.0 * u, fx, u * u) * ig;
-            j[1][l] = fma(-k, fma(v, fx, u * fy), u * v) * ig;
-            j[2][l] = fma(-k * 2.0 * v, fy, v * v) * ig;
-            j[3][l] = fma(-k, fx, u) * ig;
-            j[4][l] = ig;
-            wr[l] = w[l] * r;
-            wv[l] = r;
+            q[0][l] = fma(-k * 2.0 * u, fx, u * u) * ig;
+            q[1][l] = fma(-k, fma(v, fx, u * fy), u * v) * ig;
+            q[2][l] = fma(-k * 2.0 * v, fy, v * v) * ig;
+            q[3][l] = fma(-k, fx, u) * ig;
+            q[4][l] = ig;
+            q[5][l] = r;
+            q[6][l] = w[l];
         }
-        for l in 0..LANES {
-            acc[0][l] = fma(wr[l], wv[l], acc[0][l]);
-        }
+        let mut add = |idx: usize, x: usize, y: usize| {
+            let mut s = [0.0; LANES];
+            for g in 0..BLOCK / LANES {
+                for l in 0..LANES {
+                    let i = g * LANES + l;
+                    s[l] = fma(q[6][i] * q[x][i], q[y][i], s[l]);
+                }
+            }
+            for l in 0..LANES {
+                acc[idx][l] += s[l];
+            }
+        };
+        add(0, 5, 5);
         let mut idx = 6;
         for row in 0..5 {
-            for l in 0..LANES {
-                acc[1 + row][l] = fma(wr[l], j[row][l], acc[1 + row][l]);
-            }
+            add(1 + row, 5, row);
             for col in row..5 {
-                for l in 0..LANES {
-                    acc[idx][l] = fma(w[l] * j[row][l], j[col][l], acc[idx][l]);
-                }
+                add(idx, row, col);
                 idx += 1;
             }
         }
@@ -2039,7 +2048,7 @@ mod tests {
         let fr = principal_frame(&pts, Some(&weights)).unwrap();
         let inv = 1.0 / fr.var_t.sqrt();
         let fp = FramePoints::new(&pts, Some(&weights), &fr, inv, 1.0);
-        assert_eq!((fp.len, fp.u.len()), (22, 24));
+        assert_eq!((fp.len, fp.u.len()), (22, 32));
         let theta = [0.3, -0.05, 0.02, 0.1, -0.2];
         let (c0, h0, g0) = sampson_normal_generic::<false>(&fp, &theta).unwrap();
         // The same sums written out point by point.
