@@ -768,13 +768,13 @@ fn sampson_normal_generic<const FUSED: bool>(
         let mut add = |idx: usize, x: usize, y: usize| {
             let mut s = [0.0; LANES];
             for g in 0..BLOCK / LANES {
-                for l in 0..LANES {
+                for (l, sl) in s.iter_mut().enumerate() {
                     let i = g * LANES + l;
-                    s[l] = fma(q[6][i] * q[x][i], q[y][i], s[l]);
+                    *sl = fma(q[6][i] * q[x][i], q[y][i], *sl);
                 }
             }
-            for l in 0..LANES {
-                acc[idx][l] += s[l];
+            for (a, sl) in acc[idx].iter_mut().zip(s) {
+                *a += sl;
             }
         };
         add(0, 5, 5);
