@@ -328,10 +328,16 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // starts, where the board's curves meet (when that was too far from the pixel
                 // position to be taken) and where the corner's neighbours put it. Only a
                 // converged answer that confirms its start (within the board fit's `max_shift`)
-                // counts: one farther off has found another junction.
+                // counts: one farther off has found another junction. An answer from one side
+                // of the junction gets the first start: a print's dot gain bridges a junction,
+                // and its maximum can sit at one tip, 2 px from where the curves meet.
                 let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
-                if local.status == Status::Failed {
-                    let predicted = neighbour_prediction(&corners, b, (row, col));
+                if local.status == Status::Failed
+                    || (local.status == Status::Fallback && too_far.is_some())
+                {
+                    let predicted = (local.status == Status::Failed)
+                        .then(|| neighbour_prediction(&corners, b, (row, col)))
+                        .flatten();
                     let mut starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
                     let confirmed = starts.find_map(|[x, y]| {
                         let start = Corner { x, y, ..corners[i] };
