@@ -638,8 +638,8 @@ fn real_cubic_roots(c3: f64, c2: f64, c1: f64, c0: f64) -> ([f64; 3], usize) {
     (out, n)
 }
 
-/// Points per block in [`sampson_normal`]: the per-point work is written over fixed-size lane
-/// arrays so that the compiler can vectorize it (four `f64` lanes fill an AVX2 register).
+/// Lanes of [`sampson_normal`]'s running sums: the per-point work is written over fixed-size
+/// lane arrays so that the compiler can vectorize it (four `f64` lanes fill an AVX2 register).
 const LANES: usize = 4;
 /// Points per block of [`sampson_normal`]'s sums (a multiple of [`LANES`]).
 const BLOCK: usize = 4 * LANES;
@@ -710,7 +710,7 @@ fn sampson_normal(
     sampson_normal_generic::<false>(pts, theta)
 }
 
-/// [`sampson_normal_generic`] compiled for AVX2 + FMA: each block of [`LANES`] points is one
+/// [`sampson_normal_generic`] compiled for AVX2 + FMA: each group of [`LANES`] points is one
 /// register, instead of two of the baseline x86-64 build (SSE2 only). The two agree to `f64`
 /// rounding.
 #[cfg(target_arch = "x86_64")]
@@ -2029,10 +2029,11 @@ mod tests {
         let end_fit = fit_edge_curve_with(&pts, None, guard).unwrap();
         assert_ne!(end_fit.model, EdgeModel::Conic);
     }
+
     #[test]
     fn sampson_sums_agree_across_builds_and_padding() {
         // The plain build (baseline x86-64) and the fused one (AVX2 + FMA) give the same sums,
-        // and a point count that is not a multiple of the lanes is padded without effect.
+        // and a point count that is not a multiple of the block is padded without effect.
         let pts: Vec<[f64; 2]> = (0..23)
             .map(|i| {
                 let t = i as f64 * 0.13 - 1.4;
