@@ -261,6 +261,13 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             fit_board_full(image, &pixel, &params.board_fit)
         });
         let half_offset = 0.5 * fitted.as_ref().map_or(0.0, |f| f.polarity_offset());
+        // The junction windows grow with the blur where it is known: measured by the
+        // board-wide fit, or given.
+        let blur = fitted.as_ref().map(|f| f.blur).or(params.refine.blur);
+        let junction = params
+            .junction
+            .as_ref()
+            .map(|j| blur.map_or_else(|| j.clone(), |b| j.for_blur(b)));
         let fitted = fitted.map(|f| f.corners);
         // The board's typical σ: a corner far above it is an outlier of its own board, whatever
         // the image's scale, blur and noise.
@@ -299,7 +306,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 });
                 let board_cov = fitted.as_ref().map(|f| f[k].cov);
                 if let Some(c) = board.filter(|c| c.sigma.is_some_and(|s| s <= sigma_limit)) {
-                    return match (params.junction.as_ref(), board_cov) {
+                    return match (junction.as_ref(), board_cov) {
                         (Some(j), Some(cov))
                             if c.sigma.is_some_and(|s| s > JUNCTION_GATE * typical_sigma) =>
                         {
@@ -383,7 +390,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 };
                 // The junction model where the walks failed or saw one side only; a one-sided
                 // local answer with no board answer stays if it claims the smaller σ.
-                if let Some(j) = params.junction.as_ref().filter(|_| weak) {
+                if let Some(j) = junction.as_ref().filter(|_| weak) {
                     if let Some((jc, jcov)) = junction_corner(image, &corners, b, i, pixel, j, true)
                     {
                         // A board answer (doubtful, but often sure of one direction: the curve
@@ -411,7 +418,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)))
                 };
                 let doubtful = !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
-                if let Some(j) = params.junction.as_ref().filter(|_| doubtful) {
+                if let Some(j) = junction.as_ref().filter(|_| doubtful) {
                     if let Some((jc, jcov)) = junction_corner(image, &corners, b, i, pixel, j, true)
                     {
                         if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {

@@ -416,6 +416,22 @@ fn one_sided_answers_at_bridged_junctions_restart_where_the_curves_meet() {
 }
 
 #[test]
+fn junction_windows_grow_with_the_blur() {
+    // A board wrapped round a cylinder under a 4 px blur: a 6 px junction window holds too
+    // little of the edges, and its answers at the boundary corners were up to 1 px off while
+    // claiming σ 0.07–0.09 px. The windows now grow with the measured blur.
+    for seed in [3u64, 5] {
+        let s = scene(Surface::Cylinder { radius_mm: 60.0 }, 100 + seed, |t| {
+            t.blur = 4.0
+        });
+        let (o, det) = run(&format!("blur 4 px, seed {seed}"), &s, seed);
+        eprintln!("seed {seed}: {} missing, RMS {:.4} px", o.missing, o.rms);
+        assert_eq!(det.boards.len(), 1);
+        assert!(o.rms < 0.2, "{}", o.rms);
+    }
+}
+
+#[test]
 fn a_board_whose_junctions_are_all_bridged_is_found() {
     // A 0.3 mm dot gain on an S-shaped board: the fine election rejects all but four bridged
     // junctions, squares apart, and the coarse pass at the grid step they give (stride 16)
