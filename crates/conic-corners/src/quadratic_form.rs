@@ -680,11 +680,12 @@ impl FramePoints {
             }
         }
         let len = u.len();
+        let padded = len.div_ceil(BLOCK) * BLOCK;
         // Padding lanes have |∇F| ≥ 1 at the origin (F_v = −1 there), so they are never
         // singular, and their zero weight removes them from every sum.
-        u.resize(cap.max(len), 0.0);
-        v.resize(cap.max(len), 0.0);
-        w.resize(cap.max(len), 0.0);
+        u.resize(padded, 0.0);
+        v.resize(padded, 0.0);
+        w.resize(padded, 0.0);
         Self { u, v, w, len }
     }
 
