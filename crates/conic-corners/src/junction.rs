@@ -382,11 +382,12 @@ fn fit_junction(
     p[6] = (blur * blur + 1.0 / 12.0).sqrt().max(0.5);
     p[8] = sliver.map_or(0.0, |s| s.offset);
     pixels.levels(&mut p)?;
-    let mut cost = pixels.cost(&p)?;
+    // The normal equations are formed at each trial point with its cost: a step is accepted
+    // far more often than not, and then they serve the next iteration (and the covariance).
+    let (mut jtj, mut jtr, mut cost) = pixels.normal_equations(&p)?;
     let mut lambda = 1e-3;
     let mut converged = false;
     for _ in 0..params.max_iterations {
-        let (jtj, jtr) = pixels.normal_equations(&p)?;
         let mut improved = false;
         while lambda < 1e10 {
             let mut a = jtj;
@@ -398,10 +399,11 @@ fn fit_junction(
                 continue;
             };
             let next = p + step;
-            match pixels.cost(&next) {
-                Some(c) if c <= cost => {
+            match pixels.normal_equations(&next) {
+                Some((j, r, c)) if c <= cost => {
                     let moved = step[0].hypot(step[1]);
                     p = next;
+                    (jtj, jtr) = (j, r);
                     let relative = (cost - c) / cost.max(1e-300);
                     cost = c;
                     lambda = (lambda * 0.3).max(1e-9);
@@ -431,7 +433,6 @@ fn fit_junction(
     {
         return None;
     }
-    let (jtj, _) = pixels.normal_equations(&p)?;
     let fitted = if sliver.is_some() { NP } else { NP - 1 };
     let dof = pixels.len().checked_sub(fitted).filter(|&d| d > 0)? as f64;
     let variance = cost / dof;
@@ -532,36 +533,26 @@ impl Window {
         Some(())
     }
 
-    /// Sum of squared residuals at `p`; `None` if the geometry is degenerate.
-    fn cost(&self, p: &Vector) -> Option<f64> {
-        let g = Geometry::new(p, self.sliver)?;
-        let mut sum = 0.0;
-        for i in 0..self.len() {
-            let s = g.value(self.offset(p, i));
-            let r = self.value[i]
-                - (p[NL] + p[NL + 1] * self.dx[i] + p[NL + 2] * self.dy[i] + p[NL + 3] * s);
-            sum += r * r;
-        }
-        sum.is_finite().then_some(sum)
-    }
-
-    /// `JᵀJ` and `Jᵀr` of the residuals `r = I − model` at `p`.
-    fn normal_equations(&self, p: &Vector) -> Option<(Normal, Vector)> {
+    /// `JᵀJ`, `Jᵀr` and `rᵀr` of the residuals `r = I − model` at `p`; `None` if the geometry
+    /// is degenerate or a sum is not finite.
+    fn normal_equations(&self, p: &Vector) -> Option<(Normal, Vector, f64)> {
         let g = Geometry::new(p, self.sliver)?;
         let mut jtj = Normal::zeros();
         let mut jtr = Vector::zeros();
+        let mut cost = 0.0;
         for i in 0..self.len() {
             let (m, jac) = self.model(p, &g, i);
             let r = self.value[i] - m;
             jtj.syger(1.0, &jac, &jac, 1.0);
             jtr.axpy(r, &jac, 1.0);
+            cost += r * r;
         }
         if self.sliver.is_none() {
             // No sliver: its offset stays where it is.
             jtj[(8, 8)] = 1.0;
         }
-        (jtj.iter().all(|v| v.is_finite()) && jtr.iter().all(|v| v.is_finite()))
-            .then_some((jtj, jtr))
+        (cost.is_finite() && jtj.iter().all(|v| v.is_finite()) && jtr.iter().all(|v| v.is_finite()))
+            .then_some((jtj, jtr, cost))
     }
 
     /// The pixel's offset from the junction `q`.
