@@ -24,7 +24,7 @@
 //!    corners and removed (`apply_polarity`), which puts every corner at the centre of its
 //!    junction; a line too short to measure it takes its neighbours' (`polarity_fallbacks`).
 //! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
-//! 3. **Fitting** (III-F): [`fit_edge_curve_with`] per piece, its fold-back guard only near the
+//! 3. **Fitting** (III-F): [`fit_edge_curve_with`](crate::quadratic_form::fit_edge_curve_with) per piece, its fold-back guard only near the
 //!    corner ([`BranchGuard::Near`]), with samples farther than 3.5 robust standard deviations
 //!    (MAD) from the curve rejected and the fit repeated until stable, so a pen stroke or
 //!    highlight across an edge does not pull the curve.
@@ -56,14 +56,15 @@ use crate::edge_sampling::{
     profile_half_width, sample_edge_bounded, sample_edge_with, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
-    corner_covariance, edge_jump, fit_edge_curve_among, fit_edge_curve_with, nearest_intersection,
-    BranchGuard, Curve, EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
+    corner_covariance, edge_jump, fit_edge_curve_among, nearest_intersection, BranchGuard, Curve,
+    EdgeCandidates, EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::{median_mad_in_place, segment_chain, SegmentationParams};
 use crate::GrayImage;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::ops::Range;
+use std::sync::Mutex;
 
 /// Parameters of [`fit_board`]. `Default` is what the tests and benchmarks use.
 #[derive(Clone, Debug, PartialEq)]
@@ -303,6 +304,7 @@ fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: 
         .zip(measured.par_iter().zip(&fallbacks))
         .map(|((chain, line), (m, &f))| finish_line(line, chain, m, f, params, whole_pieces))
         .collect();
+    let caches: Vec<FitCache> = lines.iter().map(|_| FitCache::default()).collect();
     // For each corner, its position in each of its two lines: (line, samples before it).
     let mut slots: Vec<[Option<(usize, usize)>; 2]> = vec![[None, None]; board.corners.len()];
     for (li, (fl, cuts)) in lines.iter().enumerate() {
@@ -325,6 +327,7 @@ fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: 
             let pick = |(li, cut): (usize, usize)| {
                 choose_segment(
                     &lines[li].0,
+                    &caches[li],
                     cut,
                     p,
                     square * params.near_squares,
@@ -928,11 +931,11 @@ fn finish_line(
 ) -> (FittedLine, Vec<(usize, usize)>) {
     let offset = apply_polarity(&mut pts, &cuts, measured, fallback);
     let ranges = segment_chain(&pts, &params.segmentation);
-    let mut scratch = Vec::new();
+    let (mut scratch, cache) = (Vec::new(), FitCache::default());
     let mut segments = Vec::with_capacity(ranges.len());
     for r in ranges {
         let fitted = if whole_pieces {
-            robust_fit(&pts, r.clone(), BranchGuard::Span, &mut scratch)
+            robust_fit(&pts, r.clone(), BranchGuard::Span, &mut scratch, &cache)
         } else {
             None
         };
@@ -1223,6 +1226,39 @@ fn extension_walk(
     })
 }
 
+/// The curve models fitted to sets of one line's samples (indices), shared by the corners that
+/// fit the same samples: a piece shorter than the corners' windows is fitted whole for each of
+/// them, and only the fold-back guard, applied afterwards, depends on the corner. On
+/// `curve_6.jpg` a fifth of the fits were such repeats.
+#[derive(Default)]
+struct FitCache(Mutex<Vec<(Vec<usize>, Option<EdgeCandidates>)>>);
+
+impl FitCache {
+    /// The models fitted to the samples `kept` of `pts`, from the cache or fitted now.
+    fn fit(&self, pts: &[[f64; 2]], kept: &[usize]) -> Option<EdgeCandidates> {
+        let lookup = |entries: &Vec<(Vec<usize>, Option<EdgeCandidates>)>| {
+            entries
+                .iter()
+                .find(|(k, _)| k.as_slice() == kept)
+                .map(|(_, c)| c.clone())
+        };
+        // A poisoned lock still holds complete entries: each is pushed whole.
+        let entries = || self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(c) = lookup(&entries()) {
+            return c;
+        }
+        // Fitted outside the lock: a corner of another thread that misses too fits the same
+        // points to the same result.
+        let points: Vec<[f64; 2]> = kept.iter().map(|&i| pts[i]).collect();
+        let fitted = EdgeCandidates::new(&points, None, EdgeModel::Line, EdgeModel::Conic);
+        let mut entries = entries();
+        if lookup(&entries).is_none() {
+            entries.push((kept.to_vec(), fitted.clone()));
+        }
+        fitted
+    }
+}
+
 /// Fits one piece with outlier rejection: samples farther than `max(3.5 · 1.4826 · MAD, 0.05 px)`
 /// from the curve are dropped and the fit repeated (rejected samples may come back) until the kept
 /// set stops changing, at most five times. Returns the curve, its model, the RMS of the kept
@@ -1233,6 +1269,7 @@ fn robust_fit(
     range: Range<usize>,
     guard: BranchGuard,
     scratch: &mut Vec<[f64; 2]>,
+    cache: &FitCache,
 ) -> Option<(Curve, EdgeModel, f64, PositionStats, usize)> {
     let mut kept: Vec<usize> = range.clone().collect();
     let mut dev: Vec<f64> = Vec::with_capacity(range.len());
@@ -1241,9 +1278,7 @@ fn robust_fit(
         if kept.len() < 3 {
             return None;
         }
-        scratch.clear();
-        scratch.extend(kept.iter().map(|&i| pts[i]));
-        let f = fit_edge_curve_with(scratch, None, guard)?;
+        let f = cache.fit(pts, &kept)?.choose(guard)?;
         dev.clear();
         dev.extend(
             kept.iter()
@@ -1351,6 +1386,7 @@ struct Chosen {
 /// so that a fit to a few samples does not win by the luck of its residuals.
 fn choose_segment(
     line: &FittedLine,
+    cache: &FitCache,
     cut: usize,
     p: [f64; 2],
     support: f64,
@@ -1377,9 +1413,13 @@ fn choose_segment(
             continue;
         }
         enough = true;
-        let Some((curve, model, _, st, kept)) =
-            robust_fit(&line.samples, lo..hi + 1, near_corner(p), &mut scratch)
-        else {
+        let Some((curve, model, _, st, kept)) = robust_fit(
+            &line.samples,
+            lo..hi + 1,
+            near_corner(p),
+            &mut scratch,
+            cache,
+        ) else {
             continue;
         };
         if kept < min_near {
@@ -1505,7 +1545,7 @@ fn intersect_corner(
 mod tests {
     use super::*;
     use crate::detect::DetectedCorner;
-    use crate::quadratic_form::{fit_edge_curve_upto, Conic, Line};
+    use crate::quadratic_form::{fit_edge_curve_upto, fit_edge_curve_with, Conic, Line};
     use crate::refine::{refine_one, RefineParams, Status};
     use crate::synth::board::{
         BoardCorner, BoardScene, Occluder, PinholeCamera, RenderedBoard, Surface,
@@ -2066,7 +2106,8 @@ mod tests {
         assert!((c.cov[0][0] - 1.04e-4).abs() < 1e-12 && c.cov[0][1].abs() < 1e-12);
         // Collinear samples cannot carry a conic: a short piece of three identical points fails.
         let pts = vec![[1.0, 1.0]; 10];
-        assert!(robust_fit(&pts, 0..10, BranchGuard::Span, &mut Vec::new()).is_none());
+        let cache = FitCache::default();
+        assert!(robust_fit(&pts, 0..10, BranchGuard::Span, &mut Vec::new(), &cache).is_none());
     }
 
     /// Time of detect vs fit_board on a 1920×1200 image with a 9×9 board; run with

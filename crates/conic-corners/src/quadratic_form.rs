@@ -965,136 +965,190 @@ pub(crate) fn fit_edge_curve_among(
     floor: EdgeModel,
     cap: EdgeModel,
 ) -> Option<CurveFit> {
-    if !valid_input(points, weights) {
-        return None;
-    }
-    let fr = principal_frame(points, weights)?;
-    if fr.count < 3 {
-        return None;
-    }
-    let scale = fr.var_t.sqrt();
-    let inv = 1.0 / scale;
-    let n = fr.count as f64;
-    let wn = n / fr.sum_w;
-    let line = line_of_frame(&fr)?;
-    let bic = |rss: f64, k: f64| n * (rss / n).max(RSS_FLOOR).ln() + k * n.ln();
-    // The line is computed whatever the floor (the others start from its frame) but cannot win
-    // when it is below the floor.
-    let line_bic = |rss: f64| {
-        if floor > EdgeModel::Line {
-            f64::INFINITY
-        } else {
-            bic(rss, 2.0)
-        }
-    };
+    EdgeCandidates::new(points, weights, floor, cap)?.choose(guard)
+}
 
-    // The line's residuals are summed from the points: `fr.var_n` is a difference of eigenvalue
-    // terms and would put a cancellation floor (10⁻¹⁶ of the extent) under a straight edge.
-    let mut rss_line = fr.var_n * n * inv * inv;
-    let mut best = (line_bic(rss_line), EdgeModel::Line, [0.0; 5], rss_line);
-    if fr.count >= 4 && cap != EdgeModel::Line {
-        let fpts = FramePoints::new(points, weights, &fr, inv, wn);
-        rss_line = 0.0;
-        // Algebraic circle `v = (κ/2)(u² + v²) + b u + d` (vertical residuals, linear in κ, b, d)
-        // from the weighted moments of 1, u and r = u² + v². A circle, not a parabola: an edge
-        // that is a circular arc (or nearly one, under mild perspective) is then fitted without
-        // the quartic misfit that pulls a parabola's middle off the arc by up to tenths of a
-        // pixel over ±100 px at κ = 3·10⁻³, and it degenerates gracefully to a line as κ → 0.
-        // Moments Σw·{1, u, u², r, r·u, r², u³, u⁴} and Σw·v·{1, u, r, u²}.
-        let (mut mu, mut mv) = ([0.0; 8], [0.0; 4]);
-        let (mut u0, mut u1) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (u, v, w) in fpts.iter() {
-            u0 = u0.min(u);
-            u1 = u1.max(u);
-            let r = u * u + v * v;
-            mu[0] += w;
-            mu[1] += w * u;
-            mu[2] += w * u * u;
-            mu[3] += w * r;
-            mu[4] += w * r * u;
-            mu[5] += w * r * r;
-            mu[6] += w * u * u * u;
-            mu[7] += w * u * u * u * u;
-            mv[0] += w * v;
-            mv[1] += w * v * u;
-            mv[2] += w * v * r;
-            mv[3] += w * v * u * u;
-            rss_line += w * v * v;
+/// The models of [`fit_edge_curve_among`] fitted to one set of points, before the fold-back guard
+/// picks among them: the guard is the only step that depends on where the curve will be used,
+/// so several corners that fit the same points share one `EdgeCandidates`.
+#[derive(Clone, Debug)]
+pub(crate) struct EdgeCandidates {
+    fr: Frame,
+    scale: f64,
+    n: f64,
+    line: Line,
+    /// The best of the line and the parabola: BIC, model, edge-frame parameters, RSS.
+    best: (f64, EdgeModel, [f64; 5], f64),
+    /// The conic if its BIC beats `best`: parameters, RSS.
+    conic: Option<([f64; 5], f64)>,
+    /// The data's extent along the edge (frame units).
+    span: (f64, f64),
+    floor: EdgeModel,
+}
+
+impl EdgeCandidates {
+    /// Fits the models from `floor` to `cap` to `points` (see [`fit_edge_curve_among`]); `None`
+    /// on bad input or too few points.
+    pub(crate) fn new(
+        points: &[[f64; 2]],
+        weights: Option<&[f64]>,
+        floor: EdgeModel,
+        cap: EdgeModel,
+    ) -> Option<Self> {
+        if !valid_input(points, weights) {
+            return None;
         }
-        best = (line_bic(rss_line), EdgeModel::Line, [0.0; 5], rss_line);
-        let solve = |nm: Matrix3<f64>, rhs: Vector3<f64>| nm.cholesky().map(|c| c.solve(&rhs));
-        let circle = solve(
-            Matrix3::new(
-                mu[0], mu[1], mu[3], mu[1], mu[2], mu[4], mu[3], mu[4], mu[5],
-            ),
-            Vector3::new(mv[0], mv[1], mv[2]),
-        )
-        .map(|sol| [sol[2], 0.0, sol[2], sol[1], sol[0]]);
-        // A parabola too: under strong perspective an edge's conic is far from a circle.
-        let parabola = solve(
-            Matrix3::new(
-                mu[0], mu[1], mu[2], mu[1], mu[2], mu[6], mu[2], mu[6], mu[7],
-            ),
-            Vector3::new(mv[0], mv[1], mv[3]),
-        )
-        .map(|sol| [sol[2], 0.0, 0.0, sol[1], sol[0]]);
-        // The better of the two by geometric cost, with the conic's first normal equations.
-        let start = [circle, parabola]
-            .into_iter()
-            .flatten()
-            .filter_map(|par| Some((par, sampson_normal(&fpts, &par)?)))
-            .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
-        if let Some((par, start)) = start {
-            let rss_par = start.0;
-            let b = bic(rss_par, 3.0);
-            if b < best.0 && floor <= EdgeModel::Parabola {
-                best = (b, EdgeModel::Parabola, par, rss_par);
-            }
-            // The conic must bring its BIC below the best so far: RSS < n e^((BIC − k ln n)/n).
-            let k_con = 3.0 + 2.0 * CONIC_PENALTY;
-            let useful = n * ((best.0 - k_con * n.ln()) / n).exp();
-            let conic = if cap == EdgeModel::Conic && fr.count >= 6 && useful > n * RSS_FLOOR {
-                sampson_refine(&fpts, par, start, useful)
+        let fr = principal_frame(points, weights)?;
+        if fr.count < 3 {
+            return None;
+        }
+        let scale = fr.var_t.sqrt();
+        let inv = 1.0 / scale;
+        let n = fr.count as f64;
+        let wn = n / fr.sum_w;
+        let line = line_of_frame(&fr)?;
+        let bic = |rss: f64, k: f64| n * (rss / n).max(RSS_FLOOR).ln() + k * n.ln();
+        // The line is computed whatever the floor (the others start from its frame) but cannot win
+        // when it is below the floor.
+        let line_bic = |rss: f64| {
+            if floor > EdgeModel::Line {
+                f64::INFINITY
             } else {
-                None
-            };
-            if let Some((con, rss_con)) = conic {
-                let b = bic(rss_con, k_con);
-                // The far side of a real edge's conic can be close: a circle on a cylinder seen
-                // at 5° elevation is a 600 × 50 px ellipse, its back 0.5 half-lengths from the
-                // data. Only a branch much closer than that is taken for a noise-fitted fold-back
-                // (it could produce a spurious intersection next to the corner).
-                let (lo, hi, min_sep) = match guard {
-                    BranchGuard::Span => (u0, u1, 0.25 * u0.abs().max(u1.abs())),
-                    BranchGuard::Near { point, clearance } => {
-                        let c = clearance.max(0.0) * inv;
-                        let u = fr.local(point)[0] * inv;
-                        (u - c, u + c, c)
-                    }
+                bic(rss, 2.0)
+            }
+        };
+
+        // The line's residuals are summed from the points: `fr.var_n` is a difference of eigenvalue
+        // terms and would put a cancellation floor (10⁻¹⁶ of the extent) under a straight edge.
+        let mut rss_line = fr.var_n * n * inv * inv;
+        let mut best = (line_bic(rss_line), EdgeModel::Line, [0.0; 5], rss_line);
+        let mut winner = None;
+        let (mut u0, mut u1) = (f64::INFINITY, f64::NEG_INFINITY);
+        if fr.count >= 4 && cap != EdgeModel::Line {
+            let fpts = FramePoints::new(points, weights, &fr, inv, wn);
+            rss_line = 0.0;
+            // Algebraic circle `v = (κ/2)(u² + v²) + b u + d` (vertical residuals, linear in κ, b, d)
+            // from the weighted moments of 1, u and r = u² + v². A circle, not a parabola: an edge
+            // that is a circular arc (or nearly one, under mild perspective) is then fitted without
+            // the quartic misfit that pulls a parabola's middle off the arc by up to tenths of a
+            // pixel over ±100 px at κ = 3·10⁻³, and it degenerates gracefully to a line as κ → 0.
+            // Moments Σw·{1, u, u², r, r·u, r², u³, u⁴} and Σw·v·{1, u, r, u²}.
+            let (mut mu, mut mv) = ([0.0; 8], [0.0; 4]);
+            for (u, v, w) in fpts.iter() {
+                u0 = u0.min(u);
+                u1 = u1.max(u);
+                let r = u * u + v * v;
+                mu[0] += w;
+                mu[1] += w * u;
+                mu[2] += w * u * u;
+                mu[3] += w * r;
+                mu[4] += w * r * u;
+                mu[5] += w * r * r;
+                mu[6] += w * u * u * u;
+                mu[7] += w * u * u * u * u;
+                mv[0] += w * v;
+                mv[1] += w * v * u;
+                mv[2] += w * v * r;
+                mv[3] += w * v * u * u;
+                rss_line += w * v * v;
+            }
+            best = (line_bic(rss_line), EdgeModel::Line, [0.0; 5], rss_line);
+            let solve = |nm: Matrix3<f64>, rhs: Vector3<f64>| nm.cholesky().map(|c| c.solve(&rhs));
+            let circle = solve(
+                Matrix3::new(
+                    mu[0], mu[1], mu[3], mu[1], mu[2], mu[4], mu[3], mu[4], mu[5],
+                ),
+                Vector3::new(mv[0], mv[1], mv[2]),
+            )
+            .map(|sol| [sol[2], 0.0, sol[2], sol[1], sol[0]]);
+            // A parabola too: under strong perspective an edge's conic is far from a circle.
+            let parabola = solve(
+                Matrix3::new(
+                    mu[0], mu[1], mu[2], mu[1], mu[2], mu[6], mu[2], mu[6], mu[7],
+                ),
+                Vector3::new(mv[0], mv[1], mv[3]),
+            )
+            .map(|sol| [sol[2], 0.0, 0.0, sol[1], sol[0]]);
+            // The better of the two by geometric cost, with the conic's first normal equations.
+            let start = [circle, parabola]
+                .into_iter()
+                .flatten()
+                .filter_map(|par| Some((par, sampson_normal(&fpts, &par)?)))
+                .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
+            if let Some((par, start)) = start {
+                let rss_par = start.0;
+                let b = bic(rss_par, 3.0);
+                if b < best.0 && floor <= EdgeModel::Parabola {
+                    best = (b, EdgeModel::Parabola, par, rss_par);
+                }
+                // The conic must bring its BIC below the best so far: RSS < n e^((BIC − k ln n)/n).
+                let k_con = 3.0 + 2.0 * CONIC_PENALTY;
+                let useful = n * ((best.0 - k_con * n.ln()) / n).exp();
+                let conic = if cap == EdgeModel::Conic && fr.count >= 6 && useful > n * RSS_FLOOR {
+                    sampson_refine(&fpts, par, start, useful)
+                } else {
+                    None
                 };
-                let disc = min_branch_discriminant(&con, lo, hi);
-                if b < best.0 && disc > 0.0 && disc >= (con[2] * min_sep).powi(2) {
-                    best = (b, EdgeModel::Conic, con, rss_con);
+                if let Some((con, rss_con)) = conic {
+                    if bic(rss_con, k_con) < best.0 {
+                        winner = Some((con, rss_con));
+                    }
                 }
             }
         }
+        Some(Self {
+            fr,
+            scale,
+            n,
+            line,
+            best,
+            conic: winner,
+            span: (u0, u1),
+            floor,
+        })
     }
 
-    let (_, model, theta, rss) = best;
-    if model < floor {
-        return None;
+    /// The model with the smallest BIC whose curve passes `guard`: the conic is discarded if its
+    /// second branch comes within the guard's separation.
+    pub(crate) fn choose(&self, guard: BranchGuard) -> Option<CurveFit> {
+        let (fr, scale) = (&self.fr, self.scale);
+        let inv = 1.0 / scale;
+        let (u0, u1) = self.span;
+        let mut best = self.best;
+        if let Some((con, rss_con)) = self.conic {
+            // The far side of a real edge's conic can be close: a circle on a cylinder seen at 5°
+            // elevation is a 600 × 50 px ellipse, its back 0.5 half-lengths from the data. Only a
+            // branch much closer than that is taken for a noise-fitted fold-back (it could
+            // produce a spurious intersection next to the corner).
+            let (lo, hi, min_sep) = match guard {
+                BranchGuard::Span => (u0, u1, 0.25 * u0.abs().max(u1.abs())),
+                BranchGuard::Near { point, clearance } => {
+                    let c = clearance.max(0.0) * inv;
+                    let u = fr.local(point)[0] * inv;
+                    (u - c, u + c, c)
+                }
+            };
+            let disc = min_branch_discriminant(&con, lo, hi);
+            if disc > 0.0 && disc >= (con[2] * min_sep).powi(2) {
+                best = (f64::NAN, EdgeModel::Conic, con, rss_con);
+            }
+        }
+        let (_, model, theta, rss) = best;
+        if model < self.floor {
+            return None;
+        }
+        let rms = (rss / self.n).sqrt() * scale;
+        let curve = match model {
+            EdgeModel::Line => Curve::Line(self.line),
+            _ => Curve::Conic(frame_conic_to_image(&theta, fr, scale)),
+        };
+        Some(CurveFit {
+            curve,
+            model,
+            rms,
+            n: fr.count,
+        })
     }
-    let rms = (rss / n).sqrt() * scale;
-    let curve = match model {
-        EdgeModel::Line => Curve::Line(line),
-        _ => Curve::Conic(frame_conic_to_image(&theta, &fr, scale)),
-    };
-    Some(CurveFit {
-        curve,
-        model,
-        rms,
-        n: fr.count,
-    })
 }
 
 /// Maps the edge-frame conic `θ` back to image coordinates (`Q = Mᵀ Q̃ M`, with `M` the image →
