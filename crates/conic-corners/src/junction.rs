@@ -468,13 +468,18 @@ fn angle_sin(a: f64, b: f64) -> f64 {
     (a - b).sin()
 }
 
-/// The pixels of a disc: offsets from its centre (the start) and values.
+/// The pixels of a disc: offsets from its centre (the start) and values, padded to a multiple
+/// of [`PX`] with weight-0 copies of the centre.
 struct Window {
     sliver: Option<Sliver>,
     centre: [f64; 2],
     dx: Vec<f64>,
     dy: Vec<f64>,
     value: Vec<f64>,
+    /// 1 for the disc's pixels, 0 for the padding.
+    weight: Vec<f64>,
+    /// Pixels of the disc.
+    len: usize,
 }
 
 impl Window {
@@ -486,13 +491,15 @@ impl Window {
         if x0 < 0.0 || y0 < 0.0 || x1 > w - 1.0 || y1 > h - 1.0 {
             return None;
         }
-        let n = (((x1 - x0 + 1.0) * (y1 - y0 + 1.0)) as usize).min(MAX_PIXELS);
+        let n = (((x1 - x0 + 1.0) * (y1 - y0 + 1.0)) as usize).min(MAX_PIXELS) + PX;
         let mut win = Self {
             sliver: None,
             centre: c,
             dx: Vec::with_capacity(n),
             dy: Vec::with_capacity(n),
             value: Vec::with_capacity(n),
+            weight: Vec::with_capacity(n),
+            len: 0,
         };
         let mut y = y0;
         while y <= y1 {
@@ -509,75 +516,156 @@ impl Window {
             }
             y += 1.0;
         }
+        win.len = win.value.len();
+        win.weight.resize(win.len, 1.0);
+        let padded = win.len.div_ceil(PX) * PX;
+        for v in [&mut win.dx, &mut win.dy, &mut win.value, &mut win.weight] {
+            v.resize(padded, 0.0);
+        }
         (win.len() > 2 * NP).then_some(win)
     }
 
     fn len(&self) -> usize {
-        self.value.len()
+        self.len
+    }
+
+    /// The step of [`PX`] pixels from `i`: offsets from the window's centre, values, weights.
+    fn step(&self, i: usize) -> [&Px; 4] {
+        fn lanes(v: &[f64], i: usize) -> &Px {
+            v[i..i + PX].try_into().expect("padded to whole steps")
+        }
+        [
+            lanes(&self.dx, i),
+            lanes(&self.dy, i),
+            lanes(&self.value, i),
+            lanes(&self.weight, i),
+        ]
+    }
+
+    /// The offsets from the junction `q = (p₀, p₁)` of the pixels `dx`, `dy`.
+    fn offsets(&self, p: &Vector, dx: &Px, dy: &Px) -> (Px, Px) {
+        (
+            px(|l| self.centre[0] + dx[l] - p[0]),
+            px(|l| self.centre[1] + dy[l] - p[1]),
+        )
     }
 
     /// Sets the linear parameters `c₀, gₓ, g_y, a` (the last four entries) to their least-squares values
     /// for the geometry in `p`; `None` if the pattern does not vary over the window.
     fn levels(&self, p: &mut Vector) -> Option<()> {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: AVX2 and FMA support were just checked at run time.
+            return unsafe { self.levels_avx2(p) };
+        }
+        self.levels_generic(p)
+    }
+
+    /// [`Window::levels_generic`] compiled for AVX2 + FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn levels_avx2(&self, p: &mut Vector) -> Option<()> {
+        self.levels_generic(p)
+    }
+
+    /// [`Window::levels`], [`PX`] pixels per step.
+    #[inline(always)]
+    fn levels_generic(&self, p: &mut Vector) -> Option<()> {
         let g = Geometry::new(p, self.sliver)?;
         let mut ata = SMatrix::<f64, 4, 4>::zeros();
         let mut atb = SVector::<f64, 4>::zeros();
-        for i in 0..self.len() {
-            let s = g.value(self.offset(p, i));
-            let row = SVector::<f64, 4>::new(1.0, self.dx[i], self.dy[i], s);
-            ata += row * row.transpose();
-            atb += row * self.value[i];
+        for i in (0..self.dx.len()).step_by(PX) {
+            let [dx, dy, value, weight] = self.step(i);
+            let (ex, ey) = self.offsets(p, dx, dy);
+            let s = g.value(&ex, &ey);
+            for l in 0..PX {
+                let row = SVector::<f64, 4>::new(1.0, dx[l], dy[l], s[l]) * weight[l];
+                ata += row * row.transpose();
+                atb += row * value[l];
+            }
         }
         let sol = ata.cholesky()?.solve(&atb);
         p.fixed_rows_mut::<4>(NL).copy_from(&sol);
         Some(())
     }
 
-    /// `JᵀJ`, `Jᵀr` and `rᵀr` of the residuals `r = I − model` at `p`; `None` if the geometry
-    /// is degenerate or a sum is not finite.
+    /// `JᵀJ` (its lower triangle), `Jᵀr` and `rᵀr` of the residuals `r = I − model` at `p`;
+    /// `None` if the geometry is degenerate or a sum is not finite.
     fn normal_equations(&self, p: &Vector) -> Option<(Normal, Vector, f64)> {
-        let g = Geometry::new(p, self.sliver)?;
-        let mut jtj = Normal::zeros();
-        let mut jtr = Vector::zeros();
-        let mut cost = 0.0;
-        for i in 0..self.len() {
-            let (m, jac) = self.model(p, &g, i);
-            let r = self.value[i] - m;
-            jtj.syger(1.0, &jac, &jac, 1.0);
-            jtr.axpy(r, &jac, 1.0);
-            cost += r * r;
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: AVX2 and FMA support were just checked at run time.
+            return unsafe { self.normal_equations_avx2(p) };
         }
+        self.normal_equations_generic(p)
+    }
+
+    /// [`Window::normal_equations_generic`] compiled for AVX2 + FMA: a step's four pixels are
+    /// one register, where the baseline x86-64 build (SSE2) needs two.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn normal_equations_avx2(&self, p: &Vector) -> Option<(Normal, Vector, f64)> {
+        self.normal_equations_generic(p)
+    }
+
+    /// [`Window::normal_equations`], [`PX`] pixels per step: the model and its derivatives are
+    /// evaluated lane by lane, and each sum keeps one partial sum per lane.
+    #[inline(always)]
+    fn normal_equations_generic(&self, p: &Vector) -> Option<(Normal, Vector, f64)> {
+        let g = Geometry::new(p, self.sliver)?;
+        let (c0, gx, gy, a) = (p[NL], p[NL + 1], p[NL + 2], p[NL + 3]);
+        let mut jtj_lanes = [[0.0; PX]; NP * (NP + 1) / 2];
+        let mut jtr_lanes = [[0.0; PX]; NP];
+        let mut cost_lanes = [0.0; PX];
+        for i in (0..self.dx.len()).step_by(PX) {
+            let [dx, dy, value, weight] = self.step(i);
+            let (ex, ey) = self.offsets(p, dx, dy);
+            let (s, ds) = g.pattern(&ex, &ey);
+            // Rows of the Jacobian over all parameters, zero for the padding.
+            let mut jac = [[0.0; PX]; NP];
+            for (row, d) in jac.iter_mut().zip(&ds) {
+                *row = px(|l| a * d[l] * weight[l]);
+            }
+            jac[NL] = *weight;
+            jac[NL + 1] = px(|l| dx[l] * weight[l]);
+            jac[NL + 2] = px(|l| dy[l] * weight[l]);
+            jac[NL + 3] = px(|l| s[l] * weight[l]);
+            let r = px(|l| (value[l] - (c0 + gx * dx[l] + gy * dy[l] + a * s[l])) * weight[l]);
+            for l in 0..PX {
+                cost_lanes[l] += r[l] * r[l];
+            }
+            for (sum, row) in jtr_lanes.iter_mut().zip(&jac) {
+                for l in 0..PX {
+                    sum[l] += r[l] * row[l];
+                }
+            }
+            let mut idx = 0;
+            for row in 0..NP {
+                for col in 0..=row {
+                    for l in 0..PX {
+                        jtj_lanes[idx][l] += jac[row][l] * jac[col][l];
+                    }
+                    idx += 1;
+                }
+            }
+        }
+        let total = |lanes: &Px| lanes.iter().sum::<f64>();
+        let mut jtj = Normal::zeros();
+        let mut idx = 0;
+        for row in 0..NP {
+            for col in 0..=row {
+                jtj[(row, col)] = total(&jtj_lanes[idx]);
+                idx += 1;
+            }
+        }
+        let jtr = Vector::from_fn(|k, _| total(&jtr_lanes[k]));
+        let cost = total(&cost_lanes);
         if self.sliver.is_none() {
             // No sliver: its offset stays where it is.
             jtj[(8, 8)] = 1.0;
         }
         (cost.is_finite() && jtj.iter().all(|v| v.is_finite()) && jtr.iter().all(|v| v.is_finite()))
             .then_some((jtj, jtr, cost))
-    }
-
-    /// The pixel's offset from the junction `q`.
-    fn offset(&self, p: &Vector, i: usize) -> [f64; 2] {
-        [
-            self.centre[0] + self.dx[i] - p[0],
-            self.centre[1] + self.dy[i] - p[1],
-        ]
-    }
-
-    /// The model's value at pixel `i` and its derivatives over all parameters.
-    fn model(&self, p: &Vector, g: &Geometry, i: usize) -> (f64, Vector) {
-        let (s, ds) = g.pattern(self.offset(p, i));
-        let a = p[NL + 3];
-        let value = p[NL] + p[NL + 1] * self.dx[i] + p[NL + 2] * self.dy[i] + a * s;
-        let mut jac = Vector::zeros();
-        for k in 0..NL {
-            jac[k] = a * ds[k];
-        }
-
-        jac[NL] = 1.0;
-        jac[NL + 1] = self.dx[i];
-        jac[NL + 2] = self.dy[i];
-        jac[NL + 3] = s;
-        (value, jac)
     }
 }
 
@@ -586,7 +674,7 @@ impl Window {
 /// serves: the integrand peaks as the edges become parallel, and over `h, k ∈ [−6, 6]` the
 /// largest absolute error of each rule up to its limit is 2·10⁻⁹ (4 points up to 30°),
 /// 1.4·10⁻⁹ (8 points, 60°) and 3·10⁻⁸ (12 points, 78°, edges 12° apart). Most corners need the
-/// first: their edges meet at 60° or more. Multiples of [`LANES`] nodes, for the vector loop.
+/// first: their edges meet at 60° or more.
 const GL_RULES: [(f64, &[(f64, f64)]); 3] = [
     (
         30.0,
@@ -620,9 +708,6 @@ const GL_RULES: [(f64, &[(f64, f64)]); 3] = [
 /// Most quadrature nodes of [`GL_RULES`].
 const MAX_NODES: usize = 12;
 
-/// Quadrature nodes per step of the loop in [`Geometry::wedge_value`].
-const LANES: usize = 4;
-
 /// The quantities of the geometry shared by all pixels.
 struct Geometry {
     t: [[f64; 2]; 2],
@@ -638,8 +723,7 @@ struct Geometry {
     /// `dρ/dθ₁` (`dρ/dθ₂` is its negative).
     drho: f64,
     /// Quadrature of the integral term on `[0, asin ρ]`: `sin φ_j`, `1/(2 cos² φ_j)` and the
-    /// weights over 2π, as separate arrays so that the loop over them vectorizes; the first
-    /// `node_count` are used.
+    /// weights over 2π; the first `node_count` are used.
     node_sin: [f64; MAX_NODES],
     node_inv2c2: [f64; MAX_NODES],
     node_weight: [f64; MAX_NODES],
@@ -706,126 +790,146 @@ impl Geometry {
         })
     }
 
-    /// `S` at offset `e = x − q` and its derivatives over `(qₓ, q_y, θ₁, θ₂, κ₁, κ₂, w)`.
-    fn pattern(&self, e: [f64; 2]) -> (f64, [f64; NL]) {
-        let mut hk = [0.0; 2];
-        // d(dᵢ)/d(qₓ, q_y, θᵢ, κᵢ)
-        let mut dd = [[0.0; 4]; 2];
-        for i in 0..2 {
-            let (u, v, h) = self.edge_coordinates(i, e);
-            let kappa = self.kappa[i];
-            hk[i] = h;
-            dd[i] = [
-                -self.n[i][0] + kappa * u * self.t[i][0],
-                -self.n[i][1] + kappa * u * self.t[i][1],
-                -u - kappa * u * v,
-                -0.5 * (u * u + self.w * self.w),
-            ];
-        }
-        let (h, k) = (hk[0], hk[1]);
+    /// `S` at the offsets `e = x − q` of [`PX`] pixels (`ex`, `ey`) and its derivatives over
+    /// `(qₓ, q_y, θ₁, θ₂, κ₁, κ₂, w, δ, s)`, lane by lane: every step is a loop over the pixels,
+    /// which the compiler turns into vector instructions.
+    #[inline(always)]
+    fn pattern(&self, ex: &Px, ey: &Px) -> (Px, [Px; NL]) {
+        let iw = self.inv_w;
+        let (u0, v0, h) = self.edge_coordinates(0, ex, ey);
+        let (u1, v1, k) = self.edge_coordinates(1, ex, ey);
         // δ ≥ 0 erodes the wedges of the +1 side, {d₁ > δ, d₂ > δ} and {d₁ < −δ, d₂ < −δ};
         // δ < 0 those of the −1 side, which are the +1 side's of the pattern with d₂ and S
         // negated (`sg`).
         let sg = if self.delta >= 0.0 { 1.0 } else { -1.0 };
-        let e = self.delta.abs() * self.inv_w;
-        let k2 = sg * k;
-        let a = self.wedge(h - e, k2 - e, sg);
-        let b = self.wedge(-h - e, -k2 - e, sg);
-        let mut s = sg * (2.0 * (a.value + b.value) - 1.0);
-        let mut ds_dh = sg * 2.0 * (a.dh - b.dh);
-        let mut ds_dk = 2.0 * (a.dk - b.dk);
+        let e = self.delta.abs() * iw;
+        let a = self.wedge(&px(|l| h[l] - e), &px(|l| sg * k[l] - e), sg);
+        let b = self.wedge(&px(|l| -h[l] - e), &px(|l| -sg * k[l] - e), sg);
+        let mut s = px(|l| sg * (2.0 * (a.value[l] + b.value[l]) - 1.0));
+        let mut ds_dh = px(|l| sg * 2.0 * (a.dh[l] - b.dh[l]));
+        let mut ds_dk = px(|l| 2.0 * (a.dk[l] - b.dk[l]));
         // ∂S/∂δ; e = |δ|/w.
-        let ds_ddelta = -2.0 * (a.dh + a.dk + b.dh + b.dk) * self.inv_w;
-        let mut ds_drho = 2.0 * (a.drho + b.drho);
-        let iw = self.inv_w;
+        let ds_ddelta = px(|l| -2.0 * (a.dh[l] + a.dk[l] + b.dh[l] + b.dk[l]) * iw);
+        let mut ds_drho = px(|l| 2.0 * (a.drho[l] + b.drho[l]));
         // ∂S/∂w beyond the paths through h and k, and ∂S/∂s (the sliver's offset).
-        let (mut ds_dw, mut ds_ds) = (0.0, 0.0);
+        let (mut ds_dw, mut ds_ds) = ([0.0; PX], [0.0; PX]);
         if let Some(sliver) = self.sliver {
-            let t = self.sliver_term(hk, sliver);
-            s += t.value;
+            let t = self.sliver_term([&h, &k], sliver);
             let (dh_i, dk_j) = (t.dh, t.dk);
-            if sliver.edge == 0 {
-                ds_dh += dh_i;
-                ds_dk += dk_j;
+            let (along_h, along_k) = if sliver.edge == 0 {
+                (&dh_i, &dk_j)
             } else {
-                ds_dk += dh_i;
-                ds_dh += dk_j;
+                (&dk_j, &dh_i)
+            };
+            for l in 0..PX {
+                s[l] += t.value[l];
+                ds_dh[l] += along_h[l];
+                ds_dk[l] += along_k[l];
+                ds_drho[l] += t.drho[l];
+                // u = ±(hᵢ − s/w): the offset's own dependence on w, and ∂S/∂s.
+                ds_dw[l] = dh_i[l] * sliver.offset * iw * iw;
+                ds_ds[l] = -dh_i[l] * iw;
             }
-            ds_drho += t.drho;
-            // u = ±(hᵢ − s/w): the offset's own dependence on w, and ∂S/∂s.
-            ds_dw += dh_i * sliver.offset * iw * iw;
-            ds_ds = -dh_i * iw;
         }
-        let mut out = [0.0; NL];
-        out[0] = (ds_dh * dd[0][0] + ds_dk * dd[1][0]) * iw;
-        out[1] = (ds_dh * dd[0][1] + ds_dk * dd[1][1]) * iw;
-        out[2] = ds_dh * dd[0][2] * iw + ds_drho * self.drho;
-        out[3] = ds_dk * dd[1][2] * iw - ds_drho * self.drho;
-        out[4] = ds_dh * dd[0][3] * iw;
-        out[5] = ds_dk * dd[1][3] * iw;
-        // h = D/w − κw/2 with D the distance: ∂h/∂w = −h/w − κ; ∂e/∂w = −e/w.
-        out[6] = -ds_dh * (h * iw + self.kappa[0])
-            - ds_dk * (k * iw + self.kappa[1])
-            - ds_ddelta * self.delta * iw
-            + ds_dw;
-        out[7] = ds_ddelta;
-        out[8] = ds_ds;
+        // d(dᵢ)/d(qₓ, q_y, θᵢ, κᵢ) times ∂S/∂hᵢ / w: the chain through each edge's distance.
+        let (k0, k1) = (self.kappa[0], self.kappa[1]);
+        let (t0, t1, n0, n1) = (self.t[0], self.t[1], self.n[0], self.n[1]);
+        let ww = self.w * self.w;
+        let out = [
+            px(|l| {
+                (ds_dh[l] * (-n0[0] + k0 * u0[l] * t0[0])
+                    + ds_dk[l] * (-n1[0] + k1 * u1[l] * t1[0]))
+                    * iw
+            }),
+            px(|l| {
+                (ds_dh[l] * (-n0[1] + k0 * u0[l] * t0[1])
+                    + ds_dk[l] * (-n1[1] + k1 * u1[l] * t1[1]))
+                    * iw
+            }),
+            px(|l| ds_dh[l] * (-u0[l] - k0 * u0[l] * v0[l]) * iw + ds_drho[l] * self.drho),
+            px(|l| ds_dk[l] * (-u1[l] - k1 * u1[l] * v1[l]) * iw - ds_drho[l] * self.drho),
+            px(|l| ds_dh[l] * (-0.5 * (u0[l] * u0[l] + ww)) * iw),
+            px(|l| ds_dk[l] * (-0.5 * (u1[l] * u1[l] + ww)) * iw),
+            // h = D/w − κw/2 with D the distance: ∂h/∂w = −h/w − κ; ∂e/∂w = −e/w.
+            px(|l| {
+                -ds_dh[l] * (h[l] * iw + k0)
+                    - ds_dk[l] * (k[l] * iw + k1)
+                    - ds_ddelta[l] * self.delta * iw
+                    + ds_dw[l]
+            }),
+            ds_ddelta,
+            ds_ds,
+        ];
         (s, out)
     }
 }
 
-/// A blurred wedge `Φ₂(h, k; ρ)` and its derivatives.
+/// A blurred wedge `Φ₂(h, k; ρ)` and its derivatives, for [`PX`] pixels.
 struct Wedge {
-    value: f64,
-    dh: f64,
-    dk: f64,
-    drho: f64,
+    value: Px,
+    dh: Px,
+    dk: Px,
+    drho: Px,
 }
 
 impl Geometry {
     /// `Φ₂(h, k; ρ) = Φ(h) Φ(k) + (1/2π) ∫₀^{asin ρ} exp(−(h² + k² − 2hk sin φ) / (2 cos² φ)) dφ`
     /// (the integral by the quadrature in `nodes`), with `∂/∂h = φ(h) Φ((k − ρh)/√(1 − ρ²))`
     /// and `∂/∂ρ = φ₂(h, k; ρ)`.
-    fn wedge(&self, h: f64, k: f64, sg: f64) -> Wedge {
+    #[inline(always)]
+    fn wedge(&self, h: &Px, k: &Px, sg: f64) -> Wedge {
         let (rho, root) = (sg * self.rho, self.root);
-        let (hh, hk2) = (h * h + k * k, 2.0 * h * k);
-        Wedge {
+        let (inv_root, inv_2r2) = (1.0 / root, 0.5 / (root * root));
+        // Loops, not closures: LLVM would not inline closures this large into the vector build.
+        let mut w = Wedge {
             value: self.wedge_value(h, k, sg),
-            dh: pdf(h) * cdf((k - rho * h) / root),
-            dk: pdf(k) * cdf((h - rho * k) / root),
-            drho: exp(-(hh - hk2 * rho) / (2.0 * root * root)) / (2.0 * PI * root),
+            dh: [0.0; PX],
+            dk: [0.0; PX],
+            drho: [0.0; PX],
+        };
+        for l in 0..PX {
+            w.dh[l] = pdf(h[l]) * cdf((k[l] - rho * h[l]) * inv_root);
+            w.dk[l] = pdf(k[l]) * cdf((h[l] - rho * k[l]) * inv_root);
+            let q = h[l] * h[l] + k[l] * k[l] - 2.0 * h[l] * k[l] * rho;
+            w.drho[l] = exp(-q * inv_2r2) * (inv_root / (2.0 * PI));
         }
+        w
     }
-}
 
-impl Geometry {
     /// `Φ₂(h, k; sg ρ)` alone (see [`Geometry::wedge`]): negating ρ mirrors the quadrature's
     /// nodes.
-    fn wedge_value(&self, h: f64, k: f64, sg: f64) -> f64 {
-        let (hh, hk2) = (h * h + k * k, 2.0 * h * k * sg);
-        // Fixed-width steps with one partial sum per lane: a variable-length loop or a single
-        // running sum would not vectorize the exponentials.
-        let mut sums = [0.0; LANES];
-        for j in (0..self.node_count).step_by(LANES) {
-            for (l, sum) in sums.iter_mut().enumerate() {
-                let m = j + l;
-                *sum +=
-                    self.node_weight[m] * exp(-(hh - hk2 * self.node_sin[m]) * self.node_inv2c2[m]);
+    #[inline(always)]
+    fn wedge_value(&self, h: &Px, k: &Px, sg: f64) -> Px {
+        let hh = px(|l| h[l] * h[l] + k[l] * k[l]);
+        let hk2 = px(|l| 2.0 * h[l] * k[l] * sg);
+        let mut sum = [0.0; PX];
+        for j in 0..self.node_count {
+            let (wt, sin, c) = (self.node_weight[j], self.node_sin[j], self.node_inv2c2[j]);
+            for l in 0..PX {
+                sum[l] += wt * exp(-(hh[l] - hk2[l] * sin) * c);
             }
         }
-        cdf(h) * cdf(k) + sg * sums.iter().sum::<f64>()
+        for l in 0..PX {
+            sum[l] = cdf(h[l]) * cdf(k[l]) + sg * sum[l];
+        }
+        sum
     }
 
-    /// `S` at offset `e = x − q` without its derivatives.
-    fn value(&self, e: [f64; 2]) -> f64 {
-        let hk = self.scaled_distances(e);
+    /// `S` at the offsets `(ex, ey)` without its derivatives.
+    #[inline(always)]
+    fn value(&self, ex: &Px, ey: &Px) -> Px {
+        let (_, _, h) = self.edge_coordinates(0, ex, ey);
+        let (_, _, k) = self.edge_coordinates(1, ex, ey);
         let sg = if self.delta >= 0.0 { 1.0 } else { -1.0 };
-        let (d, h, k) = (self.delta.abs() * self.inv_w, hk[0], sg * hk[1]);
-        let x = sg
-            * (2.0 * (self.wedge_value(h - d, k - d, sg) + self.wedge_value(-h - d, -k - d, sg))
-                - 1.0);
+        let d = self.delta.abs() * self.inv_w;
+        let a = self.wedge_value(&px(|l| h[l] - d), &px(|l| sg * k[l] - d), sg);
+        let b = self.wedge_value(&px(|l| -h[l] - d), &px(|l| -sg * k[l] - d), sg);
+        let x = px(|l| sg * (2.0 * (a[l] + b[l]) - 1.0));
         match self.sliver {
-            Some(sliver) => x + self.sliver_value(hk, sliver),
+            Some(sliver) => {
+                let t = self.sliver_value([&h, &k], sliver);
+                px(|l| x[l] + t[l])
+            }
             None => x,
         }
     }
@@ -834,51 +938,69 @@ impl Geometry {
     /// edge `i` at offset `s`, so `S` gains `−2 E[X 1_R]` with `R = {±(dᵢ − s) > 0}` (the sign
     /// of `s`); in `R` the blurred `sign(dᵢ)` is `±1` exactly, which leaves
     /// `∓2 (2 Φ₂(u, k_j; ±ρ) − Φ(u))`, `u = ±(hᵢ − s/w)`.
-    fn sliver_value(&self, hk: [f64; 2], sliver: Sliver) -> f64 {
+    #[inline(always)]
+    fn sliver_value(&self, hk: [&Px; 2], sliver: Sliver) -> Px {
         let sgn = sliver.offset.signum();
         let (hi, kj) = (hk[sliver.edge], hk[1 - sliver.edge]);
-        let u = sgn * (hi - sliver.offset * self.inv_w);
-        -2.0 * sgn * (2.0 * self.wedge_value(u, kj, sgn) - cdf(u))
+        let u = px(|l| sgn * (hi[l] - sliver.offset * self.inv_w));
+        let mut w = self.wedge_value(&u, kj, sgn);
+        for l in 0..PX {
+            w[l] = -2.0 * sgn * (2.0 * w[l] - cdf(u[l]));
+        }
+        w
     }
 
     /// [`Geometry::sliver_value`] with its derivatives over `hᵢ`, `k_j` and `ρ`.
-    fn sliver_term(&self, hk: [f64; 2], sliver: Sliver) -> Wedge {
+    #[inline(always)]
+    fn sliver_term(&self, hk: [&Px; 2], sliver: Sliver) -> Wedge {
         let sgn = sliver.offset.signum();
         let (hi, kj) = (hk[sliver.edge], hk[1 - sliver.edge]);
-        let u = sgn * (hi - sliver.offset * self.inv_w);
-        let w = self.wedge(u, kj, sgn);
-        Wedge {
-            value: -2.0 * sgn * (2.0 * w.value - cdf(u)),
+        let u = px(|l| sgn * (hi[l] - sliver.offset * self.inv_w));
+        let mut w = self.wedge(&u, kj, sgn);
+        for l in 0..PX {
+            w.value[l] = -2.0 * sgn * (2.0 * w.value[l] - cdf(u[l]));
             // ∂u/∂hᵢ = ±1 cancels the leading sign.
-            dh: -2.0 * (2.0 * w.dh - pdf(u)),
-            dk: -4.0 * sgn * w.dk,
+            w.dh[l] = -2.0 * (2.0 * w.dh[l] - pdf(u[l]));
+            w.dk[l] *= -4.0 * sgn;
             // ∂(±ρ)/∂ρ = ±1.
-            drho: -4.0 * w.drho,
+            w.drho[l] *= -4.0;
         }
-    }
-
-    /// `(h, k)`: the distances of `e = x − q` from the two edges over `w` (module docs).
-    fn scaled_distances(&self, e: [f64; 2]) -> [f64; 2] {
-        [0, 1].map(|i| self.edge_coordinates(i, e).2)
+        w
     }
 
     /// The coordinates of `e = x − q` along and across edge `i`, `(u, v)`, and its scaled
     /// distance from the edge `h = (v − κu²/2)/w − κw/2`: the blur moves a curved edge's
     /// mid-level by `κw²/2` towards its centre of curvature (the Gaussian's mean of `κu²/2`
     /// along the edge).
-    fn edge_coordinates(&self, i: usize, e: [f64; 2]) -> (f64, f64, f64) {
-        let u = self.t[i][0] * e[0] + self.t[i][1] * e[1];
-        let v = self.n[i][0] * e[0] + self.n[i][1] * e[1];
-        let kappa = self.kappa[i];
-        (
-            u,
-            v,
-            (v - 0.5 * kappa * u * u) * self.inv_w - 0.5 * kappa * self.w,
-        )
+    #[inline(always)]
+    fn edge_coordinates(&self, i: usize, ex: &Px, ey: &Px) -> (Px, Px, Px) {
+        let ([tx, ty], [nx, ny], kappa) = (self.t[i], self.n[i], self.kappa[i]);
+        let u = px(|l| tx * ex[l] + ty * ey[l]);
+        let v = px(|l| nx * ex[l] + ny * ey[l]);
+        let h = px(|l| (v[l] - 0.5 * kappa * u[l] * u[l]) * self.inv_w - 0.5 * kappa * self.w);
+        (u, v, h)
     }
 }
 
+/// Pixels per step of the model's evaluation: four `f64` lanes fill an AVX2 register.
+const PX: usize = 4;
+
+/// One value per pixel of a step.
+type Px = [f64; PX];
+
+/// The lanes `f(0), …, f(PX − 1)`: a plain loop, which is inlined into the vector builds where
+/// `std::array::from_fn` was not.
+#[inline(always)]
+fn px(f: impl Fn(usize) -> f64) -> Px {
+    let mut out = [0.0; PX];
+    for (l, o) in out.iter_mut().enumerate() {
+        *o = f(l);
+    }
+    out
+}
+
 /// The standard normal distribution function.
+#[inline(always)]
 fn cdf(x: f64) -> f64 {
     0.5 * (1.0 + erf(x * FRAC_1_SQRT_2))
 }
@@ -886,6 +1008,7 @@ fn cdf(x: f64) -> f64 {
 use std::f64::consts::{FRAC_1_SQRT_2, PI};
 
 /// The standard normal density.
+#[inline(always)]
 fn pdf(x: f64) -> f64 {
     const INV_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
     INV_SQRT_2PI * exp(-0.5 * x * x)
@@ -934,6 +1057,7 @@ fn exp(x: f64) -> f64 {
 
 /// The error function, absolute error below 1.2·10⁻⁷ (Numerical Recipes' `erfc` Chebyshev fit,
 /// `erfc(x) = t exp(−x² − 1.26551223 + t P(t))`, `t = 1/(1 + |x|/2)`).
+#[inline(always)]
 pub(crate) fn erf(x: f64) -> f64 {
     let z = x.abs();
     let t = 1.0 / (1.0 + 0.5 * z);
@@ -946,17 +1070,25 @@ pub(crate) fn erf(x: f64) -> f64 {
                             + t * (-1.135_203_98
                                 + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
     let erfc = t * exp(-z * z + poly);
-    if x >= 0.0 {
-        1.0 - erfc
-    } else {
-        erfc - 1.0
-    }
+    // erf(−x) = −erf(x), as a sign copy rather than a branch, so that it vectorizes.
+    (1.0 - erfc).copysign(x)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::synth::gaussian_blur;
+
+    /// [`Geometry::value`] at one offset `e`.
+    fn value_at(g: &Geometry, e: [f64; 2]) -> f64 {
+        g.value(&[e[0]; PX], &[e[1]; PX])[0]
+    }
+
+    /// [`Geometry::pattern`] at one offset `e`.
+    fn pattern_at(g: &Geometry, e: [f64; 2]) -> (f64, [f64; NL]) {
+        let (s, ds) = g.pattern(&[e[0]; PX], &[e[1]; PX]);
+        (s[0], ds.map(|d| d[0]))
+    }
 
     /// A 41×41 X-junction at `q` (levels 0.2 and 0.8) whose edges leave at `angles` with
     /// curvatures `kappa`, its bright wedges eroded by `delta`: the sharp pattern on a grid 8×
@@ -1069,7 +1201,7 @@ mod tests {
             for i in -12..=12 {
                 for j in -12..=12 {
                     let (h, k) = (0.5 * i as f64, 0.5 * j as f64);
-                    let ours = g.wedge_value(h, k, 1.0) - cdf(h) * cdf(k);
+                    let ours = g.wedge_value(&[h; PX], &[k; PX], 1.0)[0] - cdf(h) * cdf(k);
                     worst = worst.max((ours - reference(h, k, span_deg.to_radians())).abs());
                 }
             }
@@ -1297,8 +1429,8 @@ mod tests {
         for e in [[0.4, -0.9], [2.0, 1.5], [-3.0, 0.2], [0.0, 0.0]] {
             let (h, k) = (e[1] / 1.3, -e[0] / 1.3);
             let product = erf(h * FRAC_1_SQRT_2) * erf(k * FRAC_1_SQRT_2);
-            assert!((g.value(e) - product).abs() < 1e-7, "{e:?}");
-            assert!((g.pattern(e).0 - product).abs() < 1e-7, "{e:?}");
+            assert!((value_at(&g, e) - product).abs() < 1e-7, "{e:?}");
+            assert!((pattern_at(&g, e).0 - product).abs() < 1e-7, "{e:?}");
         }
     }
 
@@ -1328,8 +1460,75 @@ mod tests {
                     })
                     .sum();
                 let exact = cdf(h) * cdf(k) + integral / (2.0 * PI);
-                let err = (g.wedge_value(h, k, 1.0) - exact).abs();
+                let err = (g.wedge_value(&[h; PX], &[k; PX], 1.0)[0] - exact).abs();
                 assert!(err < 2e-7, "{angle}° ({h}, {k}): {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn normal_equations_agree_across_builds_and_padding() {
+        let img = render_x([20.3, 19.6], [0.4, 1.9], [0.01, -0.02], 0.3, 1.2);
+        let p0 = Vector::from_row_slice(&[
+            20.1, 19.8, 0.38, 1.93, 0.005, -0.01, 1.3, 0.2, 0.0, 120.0, 0.1, -0.2, 70.0,
+        ]);
+        let sliver = Sliver {
+            edge: 1,
+            offset: -2.5,
+        };
+        // Radii whose discs leave 0 to 3 pixels of padding in the last step.
+        for (r, sliver) in [
+            (5.0, None),
+            (6.3, Some(sliver)),
+            (7.1, None),
+            (4.4, Some(sliver)),
+        ] {
+            let mut win = Window::load(&img, [20.0, 20.0], r).unwrap();
+            win.sliver = sliver;
+            let mut p = p0;
+            p[8] = sliver.map_or(0.0, |s| s.offset);
+            // Pixel by pixel, from the one-offset pattern.
+            let g = Geometry::new(&p, sliver).unwrap();
+            let (mut jtj, mut jtr, mut cost) = (Normal::zeros(), Vector::zeros(), 0.0);
+            for i in 0..win.len() {
+                let e = [
+                    win.centre[0] + win.dx[i] - p[0],
+                    win.centre[1] + win.dy[i] - p[1],
+                ];
+                let (s, ds) = pattern_at(&g, e);
+                let mut jac = Vector::zeros();
+                for k in 0..NL {
+                    jac[k] = p[NL + 3] * ds[k];
+                }
+                jac[NL] = 1.0;
+                jac[NL + 1] = win.dx[i];
+                jac[NL + 2] = win.dy[i];
+                jac[NL + 3] = s;
+                let model = p[NL] + p[NL + 1] * win.dx[i] + p[NL + 2] * win.dy[i] + p[NL + 3] * s;
+                let res = win.value[i] - model;
+                jtj.syger(1.0, &jac, &jac, 1.0);
+                jtr.axpy(res, &jac, 1.0);
+                cost += res * res;
+            }
+            if sliver.is_none() {
+                jtj[(8, 8)] = 1.0;
+            }
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()));
+            let mut builds = vec![win.normal_equations_generic(&p).unwrap()];
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+                builds.push(unsafe { win.normal_equations_avx2(&p) }.unwrap());
+            }
+            for (a, b, c) in builds {
+                assert!(close(c, cost), "r = {r}: cost {c} vs {cost}");
+                assert!(
+                    a.iter().zip(jtj.iter()).all(|(x, y)| close(*x, *y)),
+                    "r = {r}"
+                );
+                assert!(
+                    b.iter().zip(jtr.iter()).all(|(x, y)| close(*x, *y)),
+                    "r = {r}"
+                );
             }
         }
     }
@@ -1358,11 +1557,12 @@ mod tests {
             p[8] = sliver.map_or(0.0, |s| s.offset);
             let g = Geometry::new(&p, sliver).unwrap();
             let at = |p: &Vector| {
-                Geometry::new(p, sliver)
-                    .unwrap()
-                    .value([x[0] - p[0], x[1] - p[1]])
+                value_at(
+                    &Geometry::new(p, sliver).unwrap(),
+                    [x[0] - p[0], x[1] - p[1]],
+                )
             };
-            let (s, ds) = g.pattern([x[0] - p[0], x[1] - p[1]]);
+            let (s, ds) = pattern_at(&g, [x[0] - p[0], x[1] - p[1]]);
             assert!((s - at(&p)).abs() < 1e-12, "{sliver:?}");
             for k in 0..NL {
                 let h = 1e-6;
