@@ -355,6 +355,12 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     });
                     local = confirmed.unwrap_or(local);
                 }
+                // A local answer from one side of its junction cannot see the offset between the
+                // polarities that a print's dot gain puts into every edge, and is off by about
+                // half of it: its σ says so before it is weighed against the other estimates.
+                if local.status == Status::Fallback {
+                    local.sigma = local.sigma.map(|s| s.hypot(half_offset));
+                }
                 // A doubtful board-wide answer means short, extrapolated curves, where the
                 // local refiner's one-sided answer is no better; failing the gradient
                 // estimate, the board-wide answer stands.
@@ -454,21 +460,6 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     }
                     (gc, _) => gc.unwrap_or(last),
                 })
-            })
-            .collect();
-        // A local answer from one side of its junction cannot see the offset between the
-        // polarities that a print's dot gain puts into every edge, and is off by about half of
-        // it: its σ says so.
-        let refined = refined
-            .into_iter()
-            .map(|c| match c.sigma {
-                Some(s) if c.path == Path::Local && c.status == Status::Fallback => {
-                    DetectedCorner {
-                        sigma: Some(s.hypot(half_offset)),
-                        ..c
-                    }
-                }
-                _ => c,
             })
             .collect();
         refine_ms += ms(t);
