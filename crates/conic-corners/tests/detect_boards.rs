@@ -418,9 +418,9 @@ fn one_sided_answers_at_bridged_junctions_restart_where_the_curves_meet() {
 #[test]
 fn one_sided_answers_are_weighed_with_their_polarity_offset() {
     // Under a 0.2 mm dot gain on the 60 mm cylinder, the local refiner sees corner (4, 0) from
-XX
-    // answer, and once its σ took in half the polarity offset it was reported 1.58 px off with
-    // σ 0.91 px. Weighed with that offset from the start, the junction answer is taken.
+    // one side only. Compared by the σ of its fit alone it beat the junction model's answer,
+    // and was reported 1.58 px off, with σ 0.91 px once half the polarity offset was added.
+    // Weighed with that offset from the start, the junction answer is taken.
     let s = scene(Surface::Cylinder { radius_mm: 60.0 }, 101, |t| {
         t.dot_gain_mm = 0.2
     });
@@ -433,7 +433,13 @@ XX
             .iter()
             .map(|t| (t.x - c.x).hypot(t.y - c.y))
             .fold(f64::INFINITY, f64::min);
-        assert!(d < 1.0, "({}, {}) {d:.2} px off, {:?}", c.row, c.col, c.path);
+        assert!(
+            d < 1.0,
+            "({}, {}) {d:.2} px off, {:?}",
+            c.row,
+            c.col,
+            c.path
+        );
     }
 }
 
