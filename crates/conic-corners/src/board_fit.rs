@@ -24,8 +24,10 @@
 //!    corners and removed (`apply_polarity`), which puts every corner at the centre of its
 //!    junction; a line too short to measure it takes its neighbours' (`polarity_fallbacks`).
 //! 2. **Segmentation** (III-E): [`segment_chain`] at discontinuities and inflections.
-//! 3. **Fitting** (III-F): [`fit_edge_curve_with`](crate::quadratic_form::fit_edge_curve_with) per piece, its fold-back guard only near the
-//!    corner ([`BranchGuard::Near`]), with samples farther than 3.5 robust standard deviations
+//! 3. **Fitting** (III-F): [`fit_edge_curve_with`](crate::quadratic_form::fit_edge_curve_with)
+//!    per piece, its fold-back guard only near the corner ([`BranchGuard::Near`]), the models
+//!    of a set of samples fitted once for all the corners that use it, with samples farther
+//!    than 3.5 robust standard deviations
 //!    (MAD) from the curve rejected and the fit repeated until stable, so a pen stroke or
 //!    highlight across an edge does not pull the curve.
 //! 4. **Corners**: [`nearest_intersection`] of the piece of the row chain and of the column chain
