@@ -52,7 +52,8 @@
 //!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
 //!    the board is re-sorted by `(row, col)`.
 //!
-//! The result depends only on the input: targets are visited in label order and a round's
+//! The result depends only on the input: a round's sites are verified in parallel, each against
+//! the grid as it stood at the round's start, then accepted in label order, and the round's
 //! acceptances take effect together at its end.
 //!
 //! Limitations: a site is completed only next to labelled corners, so a whole missing board
@@ -65,6 +66,7 @@ use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::GrayImage;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::OnceLock;
 
@@ -580,7 +582,8 @@ fn complete_one(
     let mut added = 0;
     for _ in 0..params.rounds {
         let (r0, r1, c0, c1) = range(&boards[b].labels);
-        let mut accepted: Vec<(Label, Corner)> = Vec::new();
+        // The sites to check this round, with their consensus prediction and grid frame.
+        let mut sites: Vec<(Label, P, P, P)> = Vec::new();
         for r in r0 - 1..=r1 + 1 {
             for c in c0 - 1..=c1 + 1 {
                 let t = (r, c);
@@ -596,9 +599,17 @@ fn complete_one(
                     continue;
                 };
                 let step = 0.5 * (norm(u) + norm(v));
-                let Some(p) = consensus(&mut preds, params.agreement * step) else {
-                    continue;
-                };
+                if let Some(p) = consensus(&mut preds, params.agreement * step) {
+                    sites.push((t, p, u, v));
+                }
+            }
+        }
+        // The verification (step 3 of the module docs) of each site, in parallel: it reads the
+        // image and the grid as it stood at the start of the round, never another site's answer.
+        let checked: Vec<Option<(Label, Corner, f64)>> = sites
+            .par_iter()
+            .map(|&(t, p, u, v)| {
+                let step = 0.5 * (norm(u) + norm(v));
                 let phase = reference.phase * parity(t);
                 // A site on the board's boundary may have slivers beyond it (squares
                 // foreshortened at a silhouette): its outer side is sampled in a narrower frame
@@ -642,9 +653,7 @@ fn complete_one(
                         })?
                         .map(|(q, score)| (q, score, true))
                 });
-                let Some((q, score, on_sliver)) = verified else {
-                    continue;
-                };
+                let (q, score, on_sliver) = verified?;
                 // (c) The refiner must place the corner near the prediction. Long walks fail
                 // where scribbles or an occluder cut the edges, so shorter reaches are tried
                 // before giving up (a search position alone is only good to a few pixels).
@@ -667,20 +676,9 @@ fn complete_one(
                     };
                     refine_gradient(image, q, &g).map(|c| c.point)
                 };
-                let Some(z) = refined.or_else(last_resort) else {
-                    continue;
-                };
+                let z = refined.or_else(last_resort)?;
                 if norm(sub(z, p)) > params.max_offset * step {
-                    continue;
-                }
-                let clear = |x: f64, y: f64| (x - z[0]).hypot(y - z[1]) > 0.5 * step;
-                let free = boards
-                    .iter()
-                    .flat_map(|bd| bd.corners.iter())
-                    .all(|&i| clear(corners[i].x, corners[i].y))
-                    && accepted.iter().all(|(_, a)| clear(a.x, a.y));
-                if !free {
-                    continue;
+                    return None;
                 }
                 // A sliver's junction is barely resolved, and the gradient estimate is off by
                 // pixels there (measured on renders past the truth's visibility limit): the edge
@@ -720,17 +718,29 @@ fn complete_one(
                     })
                 };
                 if on_sliver && !confirmed() && !junction_confirms() {
-                    continue;
+                    return None;
                 }
-                accepted.push((
-                    t,
-                    Corner {
-                        x: z[0],
-                        y: z[1],
-                        angles: [angle(u), angle(v)],
-                        score,
-                    },
-                ));
+                let corner = Corner {
+                    x: z[0],
+                    y: z[1],
+                    angles: [angle(u), angle(v)],
+                    score,
+                };
+                Some((t, corner, step))
+            })
+            .collect();
+        // In site order, the corners clear of every board's corners and of those accepted
+        // before them this round.
+        let mut accepted: Vec<(Label, Corner)> = Vec::new();
+        for (t, z, step) in checked.into_iter().flatten() {
+            let clear = |x: f64, y: f64| (x - z.x).hypot(y - z.y) > 0.5 * step;
+            let free = boards
+                .iter()
+                .flat_map(|bd| bd.corners.iter())
+                .all(|&i| clear(corners[i].x, corners[i].y))
+                && accepted.iter().all(|(_, a)| clear(a.x, a.y));
+            if free {
+                accepted.push((t, z));
             }
         }
         if accepted.is_empty() {
