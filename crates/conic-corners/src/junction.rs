@@ -538,6 +538,7 @@ impl Window {
     }
 
     /// The step of [`PX`] pixels from `i`: offsets from the window's centre, values, weights.
+    #[inline(always)]
     fn step(&self, i: usize) -> [&Px; 4] {
         fn lanes(v: &[f64], i: usize) -> &Px {
             v[i..i + PX].try_into().expect("padded to whole steps")
@@ -551,6 +552,7 @@ impl Window {
     }
 
     /// The offsets from the junction `q = (p₀, p₁)` of the pixels `dx`, `dy`.
+    #[inline(always)]
     fn offsets(&self, p: &Vector, dx: &Px, dy: &Px) -> (Px, Px) {
         (
             px(|l| self.centre[0] + dx[l] - p[0]),

@@ -1114,7 +1114,7 @@ impl EdgeCandidates {
         let (fr, scale) = (&self.fr, self.scale);
         let inv = 1.0 / scale;
         let (u0, u1) = self.span;
-        let mut best = self.best;
+        let (_, mut model, mut theta, mut rss) = self.best;
         if let Some((con, rss_con)) = self.conic {
             // The far side of a real edge's conic can be close: a circle on a cylinder seen at 5°
             // elevation is a 600 × 50 px ellipse, its back 0.5 half-lengths from the data. Only a
@@ -1130,10 +1130,9 @@ impl EdgeCandidates {
             };
             let disc = min_branch_discriminant(&con, lo, hi);
             if disc > 0.0 && disc >= (con[2] * min_sep).powi(2) {
-                best = (f64::NAN, EdgeModel::Conic, con, rss_con);
+                (model, theta, rss) = (EdgeModel::Conic, con, rss_con);
             }
         }
-        let (_, model, theta, rss) = best;
         if model < self.floor {
             return None;
         }
