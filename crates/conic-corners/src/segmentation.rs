@@ -200,41 +200,51 @@ pub fn second_difference_splits(points: &[[f64; 2]], params: &SegmentationParams
 /// `ANCF(i) = Σ_Δ ω_Δ κ_M(i, Δ) n_⊥ / Σ_Δ ω_Δ`. Same direction and sign as eq. 7; the magnitude is a
 /// curvature. Points with no usable offset (the ends, coincident points) get `[0, 0]`.
 pub fn ancf(points: &[[f64; 2]], max_offset: usize) -> Vec<[f64; 2]> {
+    let n = points.len();
     let half = (max_offset as f64 / 2.0).max(0.5);
-    let omega: Vec<f64> = (0..=max_offset)
-        .map(|d| 1.0 - (-0.5 * (d as f64 / half).powi(2)).exp())
-        .collect();
-    (0..points.len())
+    let xs: Vec<f64> = points.iter().map(|p| p[0]).collect();
+    let ys: Vec<f64> = points.iter().map(|p| p[1]).collect();
+    let (mut ax, mut ay, mut wsum) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    // Offset by offset, each a pass over the points that the compiler vectorizes; every point
+    // still sums its terms in the order of the offsets.
+    for d in 1..=max_offset.min(n.saturating_sub(1) / 2) {
+        let w = 1.0 - (-0.5 * (d as f64 / half).powi(2)).exp();
+        let m = n - 2 * d;
+        let (px, qx, rx) = (&xs[..m], &xs[d..d + m], &xs[2 * d..]);
+        let (py, qy, ry) = (&ys[..m], &ys[d..d + m], &ys[2 * d..]);
+        let (ax, ay, ws) = (&mut ax[d..d + m], &mut ay[d..d + m], &mut wsum[d..d + m]);
+        for j in 0..m {
+            let c = [rx[j] - px[j], ry[j] - py[j]];
+            let a = [qx[j] - px[j], qy[j] - py[j]];
+            let b = [rx[j] - qx[j], ry[j] - qy[j]];
+            // Squared lengths: image coordinates cannot overflow, and one square root per
+            // term instead of three `hypot`s is most of this function's time.
+            let (lc2, la2, lb2) = (
+                c[0] * c[0] + c[1] * c[1],
+                a[0] * a[0] + a[1] * a[1],
+                b[0] * b[0] + b[1] * b[1],
+            );
+            let cross = c[0] * a[1] - c[1] * a[0];
+            // Left normal of c is (−c_y, c_x)/|c|; P_i is on the left when cross > 0, so the
+            // inner normal points right then. κ n = 2 |c × a| / (|a| |b| |c|) · n.
+            let s = if cross > 0.0 { -1.0 } else { 1.0 };
+            let k = 2.0 * cross.abs() * s / ((la2 * lb2).sqrt() * lc2);
+            // Coincident points give no term (a select, not a branch, to stay vectorized).
+            let usable = lc2 > 0.0 && la2 > 0.0 && lb2 > 0.0;
+            let (tx, ty, tw) = if usable {
+                (w * k * c[1], w * k * c[0], w)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            ax[j] -= tx;
+            ay[j] += ty;
+            ws[j] += tw;
+        }
+    }
+    (0..n)
         .map(|i| {
-            let (mut acc, mut wsum) = ([0.0, 0.0], 0.0);
-            let reach = i.min(points.len() - 1 - i).min(max_offset);
-            for d in 1..=reach {
-                let (p, q, r) = (points[i - d], points[i], points[i + d]);
-                let c = [r[0] - p[0], r[1] - p[1]];
-                let a = [q[0] - p[0], q[1] - p[1]];
-                let b = [r[0] - q[0], r[1] - q[1]];
-                // Squared lengths: image coordinates cannot overflow, and one square root per
-                // term instead of three `hypot`s is most of this function's time.
-                let (lc2, la2, lb2) = (
-                    c[0] * c[0] + c[1] * c[1],
-                    a[0] * a[0] + a[1] * a[1],
-                    b[0] * b[0] + b[1] * b[1],
-                );
-                if !(lc2 > 0.0 && la2 > 0.0 && lb2 > 0.0) {
-                    continue;
-                }
-                let cross = c[0] * a[1] - c[1] * a[0];
-                // Left normal of c is (−c_y, c_x)/|c|; P_i is on the left when cross > 0, so the
-                // inner normal points right then. κ n = 2 |c × a| / (|a| |b| |c|) · n.
-                let s = if cross > 0.0 { -1.0 } else { 1.0 };
-                let k = 2.0 * cross.abs() * s / ((la2 * lb2).sqrt() * lc2);
-                let w = omega[d];
-                acc[0] -= w * k * c[1];
-                acc[1] += w * k * c[0];
-                wsum += w;
-            }
-            if wsum > 0.0 {
-                [acc[0] / wsum, acc[1] / wsum]
+            if wsum[i] > 0.0 {
+                [ax[i] / wsum[i], ay[i] / wsum[i]]
             } else {
                 [0.0, 0.0]
             }
