@@ -225,7 +225,13 @@ pub fn refine_junction(
     blur: f64,
     params: &JunctionParams,
 ) -> Option<JunctionCorner> {
-    fit_junction(image, start, angles, radius, blur, None, params)
+    fit_junction(
+        image,
+        Guess::straight(start, angles, blur)?,
+        radius,
+        None,
+        params,
+    )
 }
 
 /// A third, straight edge parallel to one of the junction's: the far side of a sliver, a square
@@ -255,7 +261,8 @@ pub fn refine_junction_beside(
     if sliver.edge > 1 || !(sliver.offset.is_finite() && sliver.offset.abs() >= 0.5) {
         return None;
     }
-    fit_junction(image, start, angles, radius, blur, Some(sliver), params)
+    let guess = Guess::straight(start, angles, blur)?;
+    fit_junction(image, guess, radius, Some(sliver), params)
 }
 
 /// Where a sliver's far edge is first sought, in px beyond the junction's edge: the slivers at
@@ -276,8 +283,8 @@ const WIDEN_MIN_PX: f64 = 0.5;
 /// the smallest σ. An empty `beyond` makes it [`refine_junction`] with the wide fit below.
 ///
 /// Where `radius` exceeds `max_radius`, the plain model is fitted again within `radius` capped
-/// at `wide_radius`, from the first answer, and that answer is kept if it agrees with the
-/// first. The wider window has more pixels, but the model (two edges of constant curvature)
+/// at `wide_radius`, from the first answer (all its parameters: position, angles, curvatures,
+/// blur and print offset), and that answer is kept if it agrees with the first. The wider window has more pixels, but the model (two edges of constant curvature)
 /// may not hold over it: an edge's curvature changes near a silhouette, a sliver's far edge or
 /// the next junction comes in (where the sliver model won, the plain one then fails or
 /// disagrees). The two fits share the first one's pixels, so where the model holds their
@@ -303,14 +310,11 @@ pub fn refine_junction_at_boundary(
         max_radius: params.wide_radius,
         ..params.clone()
     };
-    // The optics' blur behind the first fit's `w` (which includes the pixel's footprint).
-    let optics = (first.blur * first.blur - 1.0 / 12.0).max(0.0).sqrt();
-    let Some(wide) = refine_junction(
+    let Some(wide) = fit_junction(
         image,
-        first.point,
-        first.angles,
+        Guess::from_answer(&first),
         radius,
-        optics,
+        None,
         &wide_params,
     ) else {
         return Some(first);
@@ -353,18 +357,73 @@ fn best_at_boundary(
         .min_by(|a, b| a.sigma.total_cmp(&b.sigma))
 }
 
+/// The first values of a fit's nonlinear parameters (image coordinates, radians, px).
+#[derive(Clone, Copy, Debug)]
+struct Guess {
+    point: [f64; 2],
+    angles: [f64; 2],
+    curvatures: [f64; 2],
+    /// The model's `w`: the optics' blur and the pixel's footprint.
+    w: f64,
+    /// The print offset `δ`.
+    offset: f64,
+}
+
+impl Guess {
+    /// Straight edges and no print offset, from the optics' blur σ = `blur` px; `None` for a
+    /// blur that is negative or not finite.
+    fn straight(point: [f64; 2], angles: [f64; 2], blur: f64) -> Option<Self> {
+        (blur.is_finite() && blur >= 0.0).then(|| Self {
+            point,
+            angles,
+            curvatures: [0.0; 2],
+            w: (blur * blur + 1.0 / 12.0).sqrt().max(0.5),
+            offset: 0.0,
+        })
+    }
+
+    /// Every nonlinear parameter of an earlier answer: where a fit over a wider window starts.
+    fn from_answer(j: &JunctionCorner) -> Self {
+        Self {
+            point: j.point,
+            angles: j.angles,
+            curvatures: j.curvatures,
+            w: j.blur,
+            offset: j.offset,
+        }
+    }
+}
+
+/// How far (in units of the accepted shift) the fit may wander from its start before it is
+/// given up: a Levenberg–Marquardt walk that far out has found another edge or junction and
+/// does not come back, and its remaining iterations were most of the cost of failed fits.
+const ABANDON_SHIFTS: f64 = 2.0;
+
 fn fit_junction(
     image: &GrayImage,
-    start: [f64; 2],
-    angles: [f64; 2],
+    guess: Guess,
     radius: f64,
-    blur: f64,
     sliver: Option<Sliver>,
     params: &JunctionParams,
 ) -> Option<JunctionCorner> {
+    let Guess {
+        point: start,
+        angles,
+        ..
+    } = guess;
+    let values = [
+        guess.curvatures[0],
+        guess.curvatures[1],
+        guess.w,
+        guess.offset,
+    ];
     if params.validate().is_err()
-        || !start.iter().chain(&angles).all(|v| v.is_finite())
-        || !(blur.is_finite() && blur >= 0.0)
+        || !start
+            .iter()
+            .chain(&angles)
+            .chain(&values)
+            .all(|v| v.is_finite())
+        || !(guess.w > 0.0)
     {
         return None;
     }
@@ -384,8 +443,12 @@ fn fit_junction(
     p[1] = start[1];
     p[2] = angles[0];
     p[3] = angles[1];
-    p[6] = (blur * blur + 1.0 / 12.0).sqrt().max(0.5);
+    p[4] = guess.curvatures[0];
+    p[5] = guess.curvatures[1];
+    p[6] = guess.w;
+    p[7] = guess.offset;
     p[8] = sliver.map_or(0.0, |s| s.offset);
+    let limit = params.max_shift.min(r);
     pixels.levels(&mut p)?;
     // The normal equations are formed at each trial point with its cost: a step is accepted
     // far more often than not, and then they serve the next iteration (and the covariance).
@@ -412,6 +475,9 @@ fn fit_junction(
                     let relative = (cost - c) / cost.max(1e-300);
                     cost = c;
                     lambda = (lambda * 0.3).max(1e-9);
+                    if (p[0] - start[0]).hypot(p[1] - start[1]) > ABANDON_SHIFTS * limit {
+                        return None;
+                    }
                     improved = true;
                     converged = moved < 1e-3 && relative < 1e-4;
                     break;
@@ -432,7 +498,7 @@ fn fit_junction(
     }
     let q = [p[0], p[1]];
     let w = p[6];
-    if (q[0] - start[0]).hypot(q[1] - start[1]) > params.max_shift.min(r)
+    if (q[0] - start[0]).hypot(q[1] - start[1]) > limit
         || !(0.3..=6.0).contains(&w)
         || angle_sin(p[2], p[3]).abs() < min_sin
     {
@@ -1463,6 +1529,58 @@ mod tests {
             .unwrap();
         let f = refine_junction(&clean, [20.0, 20.0], angles, 16.0, 1.0, &narrow).unwrap();
         assert_eq!(n.point, f.point);
+    }
+
+    #[test]
+    fn the_wide_fit_starts_from_every_parameter_of_the_first() {
+        // Curved edges, a print offset and noise: started from the first answer's curvatures,
+        // blur and offset, the wide fit reaches the minimum that a start from straight edges
+        // reaches.
+        use rand::SeedableRng;
+        let (q, angles) = ([20.3, 19.8], [0.4, 1.9]);
+        let mut image = render_x(q, angles, [0.02, -0.03], 0.4, 1.2);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        crate::synth::add_gaussian_noise(&mut image, 0.02, &mut rng);
+        let params = JunctionParams::default();
+        let wide = JunctionParams {
+            max_radius: params.wide_radius,
+            ..params.clone()
+        };
+        let first = refine_junction(&image, [20.0, 20.0], angles, 16.0, 1.0, &params).unwrap();
+        let warm = fit_junction(&image, Guess::from_answer(&first), 16.0, None, &wide).unwrap();
+        let cold = fit_junction(
+            &image,
+            Guess::straight(first.point, first.angles, 1.0).unwrap(),
+            16.0,
+            None,
+            &wide,
+        )
+        .unwrap();
+        let apart = (warm.point[0] - cold.point[0]).hypot(warm.point[1] - cold.point[1]);
+        assert!(apart < 1e-3, "{warm:?} {cold:?}");
+        assert!(
+            (warm.offset - cold.offset).abs() < 1e-3,
+            "{warm:?} {cold:?}"
+        );
+        assert!(
+            (q[0] - warm.point[0]).hypot(q[1] - warm.point[1]) < 0.05,
+            "{warm:?}"
+        );
+    }
+
+    #[test]
+    fn a_fit_that_wanders_off_returns_nothing() {
+        // Started 1.2 px from a junction (within the accepted shift of 1.5 px) the fit finds
+        // it; started on an edge 5 px away, far beyond, it walks off and returns nothing.
+        let (q, angles) = ([20.0, 20.0], [0.0, std::f64::consts::FRAC_PI_2]);
+        let image = render_x(q, angles, [0.0, 0.0], 0.0, 1.0);
+        let params = JunctionParams::default();
+        let near = refine_junction(&image, [20.8, 20.9], angles, 6.0, 1.0, &params).unwrap();
+        assert!(
+            (near.point[0] - q[0]).hypot(near.point[1] - q[1]) < 0.01,
+            "{near:?}"
+        );
+        assert!(refine_junction(&image, [25.0, 20.0], angles, 6.0, 1.0, &params).is_none());
     }
 
     #[test]
