@@ -333,6 +333,28 @@ fn flip_splits(points: &[[f64; 2]], params: &SegmentationParams) -> Vec<usize> {
 /// the flips of its ANCF curvature ([`ancf`]). The ranges are in order, disjoint and cover
 /// `0..points.len()`; an empty chain gives no range.
 pub fn segment_chain(points: &[[f64; 2]], params: &SegmentationParams) -> Vec<Range<usize>> {
+    segment_pieces(points, params)
+        .into_iter()
+        .map(|(r, _)| r)
+        .collect()
+}
+
+/// Where a piece of [`segment_pieces`] begins.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PieceStart {
+    /// At the start of the chain.
+    Chain,
+    /// After a discontinuity ([`second_difference_splits`]): the edge itself breaks there.
+    Discontinuity,
+    /// At a flip of the curvature (an inflection): the edge runs on smoothly.
+    Inflection,
+}
+
+/// [`segment_chain`] with the reason each piece begins where it does.
+pub fn segment_pieces(
+    points: &[[f64; 2]],
+    params: &SegmentationParams,
+) -> Vec<(Range<usize>, PieceStart)> {
     if points.is_empty() {
         return Vec::new();
     }
@@ -345,12 +367,19 @@ pub fn segment_chain(points: &[[f64; 2]], params: &SegmentationParams) -> Vec<Ra
         if a >= b {
             continue;
         }
-        let mut start = a;
+        let (mut start, mut kind) = (
+            a,
+            if a == 0 {
+                PieceStart::Chain
+            } else {
+                PieceStart::Discontinuity
+            },
+        );
         for cut in flip_splits(&points[a..b], params) {
-            out.push(start..a + cut);
-            start = a + cut;
+            out.push((start..a + cut, kind));
+            (start, kind) = (a + cut, PieceStart::Inflection);
         }
-        out.push(start..b);
+        out.push((start..b, kind));
     }
     out
 }
@@ -442,6 +471,11 @@ mod tests {
                 cut.abs_diff(infl) <= 4,
                 "r = {r}: cut at {cut}, inflection at {infl}"
             );
+            let kinds: Vec<_> = segment_pieces(&pts, &SegmentationParams::default())
+                .into_iter()
+                .map(|(_, k)| k)
+                .collect();
+            assert_eq!(kinds, [PieceStart::Chain, PieceStart::Inflection]);
         }
     }
 
@@ -456,6 +490,13 @@ mod tests {
         assert_eq!(cuts, vec![100]);
         let segs = segment_chain(&pts, &SegmentationParams::default());
         assert_eq!(segs, vec![0..100, 100..pts.len()]);
+        assert_eq!(
+            segment_pieces(&pts, &SegmentationParams::default()),
+            [
+                (0..100, PieceStart::Chain),
+                (100..pts.len(), PieceStart::Discontinuity)
+            ]
+        );
     }
 
     #[test]
