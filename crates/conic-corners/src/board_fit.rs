@@ -1560,7 +1560,8 @@ fn across_inflection(
                 }
             }
         }
-        for side in [lo..cut.max(lo), cut.min(hi + 1)..hi + 1] {
+        let split = cut.clamp(lo, hi + 1);
+        for side in [lo..split, split..hi + 1] {
             if side.len() < min_near {
                 continue;
             }
