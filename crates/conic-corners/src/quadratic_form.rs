@@ -1572,10 +1572,12 @@ impl Basis {
 /// along the data. With `Φ` the design matrix of the samples in their principal frame (centre,
 /// unit tangent, RMS extent as the unit of `u`) with the polynomial basis of the model (`1, u` for
 /// a line, `1, u, u²` for a parabola, `1, u, …, u⁴` for a conic, whose two extra coefficients act
-/// like `u³`, `u⁴` along a nearly straight edge) and `s²` the residual variance (squared distances
-/// over `n − k`), the curve's position at `u` has variance `s² φ(u)ᵀ (ΦᵀΦ)⁻¹ φ(u)`.
+/// like `u³`, `u⁴` along a nearly straight edge; or the basis of [`Inflected`], about the corner)
+/// and `s²` the residual variance (squared distances over `n − k`), the curve's position at `u`
+/// has variance `s² φ(u)ᵀ (ΦᵀΦ)⁻¹ φ(u)`.
 #[derive(Clone, Debug)]
 pub(crate) struct PositionStats {
+    /// Origin of `u`: the samples' centroid, or the corner for [`Inflected`].
     centre: [f64; 2],
     tangent: [f64; 2],
     scale: f64,
