@@ -235,6 +235,15 @@ pub struct FittedLine {
     pub polarity_offset: f64,
 }
 
+impl FittedLine {
+    /// The first and last of the samples `range` that lie within `reach` px of `p`; `None` if
+    /// none does.
+    fn within(&self, range: Range<usize>, p: [f64; 2], reach: f64) -> Option<(usize, usize)> {
+        let inside = |i: &usize| dist(self.samples[*i], p) <= reach;
+        Some((range.clone().find(inside)?, range.rev().find(inside)?))
+    }
+}
+
 /// Everything [`fit_board_with_curves`] computed: the corners, the lines for drawing, the blur.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BoardFit {
@@ -1282,32 +1291,12 @@ fn robust_fit(
     scratch: &mut Vec<[f64; 2]>,
     cache: &FitCache,
 ) -> Option<(Curve, EdgeModel, f64, PositionStats, usize)> {
-    let mut kept: Vec<usize> = range.clone().collect();
-    let mut dev: Vec<f64> = Vec::with_capacity(range.len());
-    let mut fit = None;
-    for _ in 0..5 {
-        if kept.len() < 3 {
-            return None;
-        }
-        let f = cache.fit(pts, &kept)?.choose(guard)?;
-        dev.clear();
-        dev.extend(
-            kept.iter()
-                .map(|&i| f.curve.distance(pts[i][0], pts[i][1]).abs()),
-        );
-        let limit = rejection_limit(&mut dev);
-        let next: Vec<usize> = range
-            .clone()
-            .filter(|&i| f.curve.distance(pts[i][0], pts[i][1]).abs() <= limit)
-            .collect();
-        let stable = next == kept;
-        fit = Some(f);
-        if stable {
-            break;
-        }
-        kept = next;
-    }
-    let f = fit?;
+    let (f, _, kept) = until_stable(
+        pts,
+        range,
+        |kept| cache.fit(pts, kept)?.choose(guard),
+        |f, q| f.curve.distance(q[0], q[1]),
+    )?;
     if kept.len() < 3 {
         return None;
     }
@@ -1317,44 +1306,63 @@ fn robust_fit(
     Some((f.curve, f.model, f.rms, stats, kept.len()))
 }
 
-/// The outlier limit of [`robust_fit`] for the absolute residuals `dev` (reordered):
-/// `max(3.5 · 1.4826 · MAD, 0.05 px)`.
-fn rejection_limit(dev: &mut [f64]) -> f64 {
-    let mid = dev.len() / 2;
-    let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
-    (3.5 * 1.4826 * mad).max(0.05)
-}
-
-/// [`robust_fit`] with the curve of [`PositionStats::inflected`] for the samples `range` of
-/// `pts`, which run across an inflection at the corner `p`: the curve's tangent at `p`, its
-/// statistics and the number of kept samples.
-fn robust_inflected(
+/// The outlier rejection of [`robust_fit`]: `fit` to the samples `range` of `pts`, the samples
+/// farther than `max(3.5 · 1.4826 · MAD, 0.05 px)` from it by `distance` dropped and the fit
+/// repeated (rejected samples may come back) until the kept set stops changing, at most five
+/// times. Returns the last fit, the number of samples it was made from and the kept set after
+/// it; `None` when a fit fails or fewer than 3 samples are left to fit.
+fn until_stable<F>(
     pts: &[[f64; 2]],
     range: Range<usize>,
-    p: [f64; 2],
-) -> Option<(Curve, PositionStats, usize)> {
-    let mut kept: Vec<[f64; 2]> = pts[range.clone()].to_vec();
-    let mut dev = Vec::with_capacity(kept.len());
-    let mut fit = None;
+    mut fit: impl FnMut(&[usize]) -> Option<F>,
+    distance: impl Fn(&F, &[f64; 2]) -> f64,
+) -> Option<(F, usize, Vec<usize>)> {
+    let mut kept: Vec<usize> = range.clone().collect();
+    let mut dev: Vec<f64> = Vec::with_capacity(range.len());
+    let mut last = None;
     for _ in 0..5 {
-        let (curve, stats) = PositionStats::inflected(&kept, p)?;
+        if kept.len() < 3 {
+            return None;
+        }
+        let f = fit(&kept)?;
         dev.clear();
-        dev.extend(kept.iter().map(|q| curve.residual(q).abs()));
-        let limit = rejection_limit(&mut dev);
-        let next: Vec<[f64; 2]> = pts[range.clone()]
-            .iter()
-            .filter(|q| curve.residual(q).abs() <= limit)
-            .copied()
+        dev.extend(kept.iter().map(|&i| distance(&f, &pts[i]).abs()));
+        let mid = dev.len() / 2;
+        let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let limit = (3.5 * 1.4826 * mad).max(0.05);
+        let next: Vec<usize> = range
+            .clone()
+            .filter(|&i| distance(&f, &pts[i]).abs() <= limit)
             .collect();
         let stable = next == kept;
-        fit = Some((curve, stats, kept.len()));
+        last = Some((f, kept.len()));
         if stable {
             break;
         }
         kept = next;
     }
-    let (curve, stats, n) = fit?;
-    Some((curve.tangent_at(p)?, stats, n))
+    let (f, fitted) = last?;
+    Some((f, fitted, kept))
+}
+
+/// [`robust_fit`] with the curve of [`PositionStats::inflected`] for the samples `range` of
+/// `pts`, which run across an inflection at the corner `p`: the curve's tangent at `p`, its
+/// statistics and the number of samples of the last fit.
+fn robust_inflected(
+    pts: &[[f64; 2]],
+    range: Range<usize>,
+    p: [f64; 2],
+) -> Option<(Curve, PositionStats, usize)> {
+    let ((curve, stats), fitted, _) = until_stable(
+        pts,
+        range,
+        |kept| {
+            let points: Vec<[f64; 2]> = kept.iter().map(|&i| pts[i]).collect();
+            PositionStats::inflected(&points, p)
+        },
+        |(curve, _), q| curve.residual(q),
+    )?;
+    Some((curve.tangent_at(p)?, stats, fitted))
 }
 
 /// Separation (px) that a corner's curve must keep from its conic's second branch near the
@@ -1458,8 +1466,7 @@ fn choose_segment(
     let mut previous = None;
     for (seg, reach) in candidates.flat_map(|s| [(s, support), (s, NARROW_SUPPORT * support)]) {
         let (a, b) = seg.samples;
-        let inside = |i: &usize| dist(line.samples[*i], p) <= reach;
-        let (Some(lo), Some(hi)) = ((a..b).find(inside), (a..b).rev().find(inside)) else {
+        let Some((lo, hi)) = line.within(a..b, p, reach) else {
             continue;
         };
         if hi + 1 - lo < min_near {
@@ -1545,8 +1552,7 @@ fn across_inflection(
     };
     let mut scratch = Vec::new();
     for reach in [support, NARROW_SUPPORT * support] {
-        let inside = |i: &usize| dist(line.samples[*i], p) <= reach;
-        let (Some(lo), Some(hi)) = ((a..b).find(inside), (a..b).rev().find(inside)) else {
+        let Some((lo, hi)) = line.within(a..b, p, reach) else {
             continue;
         };
         // Samples on both sides of the corner, enough to pin the bend on each.
