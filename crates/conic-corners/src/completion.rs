@@ -582,8 +582,8 @@ fn complete_one(
     let mut added = 0;
     for _ in 0..params.rounds {
         let (r0, r1, c0, c1) = range(&boards[b].labels);
-        // The sites to check this round, with their consensus prediction and grid frame.
-        let mut sites: Vec<(Label, P, P, P)> = Vec::new();
+        // The sites to check this round, with their consensus prediction, grid frame and step.
+        let mut sites: Vec<(Label, P, P, P, f64)> = Vec::new();
         for r in r0 - 1..=r1 + 1 {
             for c in c0 - 1..=c1 + 1 {
                 let t = (r, c);
@@ -600,7 +600,7 @@ fn complete_one(
                 };
                 let step = 0.5 * (norm(u) + norm(v));
                 if let Some(p) = consensus(&mut preds, params.agreement * step) {
-                    sites.push((t, p, u, v));
+                    sites.push((t, p, u, v, step));
                 }
             }
         }
@@ -608,8 +608,7 @@ fn complete_one(
         // image and the grid as it stood at the start of the round, never another site's answer.
         let checked: Vec<Option<(Label, Corner, f64)>> = sites
             .par_iter()
-            .map(|&(t, p, u, v)| {
-                let step = 0.5 * (norm(u) + norm(v));
+            .map(|&(t, p, u, v, step)| {
                 let phase = reference.phase * parity(t);
                 // A site on the board's boundary may have slivers beyond it (squares
                 // foreshortened at a silhouette): its outer side is sampled in a narrower frame
