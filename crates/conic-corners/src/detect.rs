@@ -52,8 +52,8 @@ pub struct DetectParams {
     pub junction: Option<JunctionParams>,
     /// A board-wide answer whose σ exceeds this multiple of its board's median σ (less support
     /// than most: curved, short or extrapolated lines) is combined with the junction model's
-    /// answer. Default 1.5. Lower is more accurate and slower: at 1.0 the curved-board
-    /// benchmark's corners go 0.0072 → 0.0067 px RMS (flattest curvature bin 0.0067 → 0.0062,
+    /// answer. Default 1.5. Lower is more accurate and slower: at 1.0 (measured at `b03cdf6`)
+    /// the curved-board benchmark's corners go 0.0072 → 0.0067 px RMS (flattest curvature bin 0.0067 → 0.0062,
     /// top bin 0.0154 → 0.0141, stereo reprojection 0.0040 → 0.0036 px) and the robustness
     /// report's geometric mean 0.0196 → 0.0195 px, but `detect` on the speed benchmark's flat
     /// board takes about 5 ms more (half its corners get a junction fit) and on `curve_6.jpg`
