@@ -634,6 +634,29 @@ fn complete_one(
                 )
                 .map(|(q, score)| (q, score, false))
                 .or_else(|| {
+                    // A site near the image's border whose full frame leaves the image: the
+                    // whole frame is narrowed instead (a board cut by the border, whose corners
+                    // there the election's template cannot reach either).
+                    let full = Frame::symmetric(u, v);
+                    (junction(image, p, &full).is_none())
+                        .then(|| {
+                            SLIVER_SCALES.iter().find_map(|&s| {
+                                verify(
+                                    image,
+                                    p,
+                                    (u, v),
+                                    &Frame::symmetric(scale(u, s), scale(v, s)),
+                                    STARTS.into_iter(),
+                                    0.0,
+                                    phase,
+                                    min_contrast,
+                                    params,
+                                )
+                            })
+                        })?
+                        .map(|(q, score)| (q, score, true))
+                })
+                .or_else(|| {
                     on_boundary
                         .then(|| {
                             SLIVER_SCALES.iter().find_map(|&s| {
@@ -652,7 +675,7 @@ fn complete_one(
                         })?
                         .map(|(q, score)| (q, score, true))
                 });
-                let (q, score, on_sliver) = verified?;
+                let (q, score, narrow) = verified?;
                 // (c) The refiner must place the corner near the prediction. Long walks fail
                 // where scribbles or an occluder cut the edges, so shorter reaches are tried
                 // before giving up (a search position alone is only good to a few pixels).
@@ -716,7 +739,7 @@ fn complete_one(
                             })
                     })
                 };
-                if on_sliver && !confirmed() && !junction_confirms() {
+                if narrow && !confirmed() && !junction_confirms() {
                     return None;
                 }
                 let corner = Corner {

@@ -389,10 +389,11 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// Candidates within 7 px of the border (the template would leave the image) are dropped.
 ///
 /// A coarse pass on the box-downsampled image adds the corners the fine tests reject on large
-/// squares (its stride from the grid step of the fine corners); when the two passes elect fewer
-/// than nine corners together, or the fine pass too few to give a step (every junction bridged
-/// by a print's dot gain), passes at strides 2, 4 and 8 are tried and the one electing the most
-/// corners is kept.
+/// squares (its stride from the grid step of the fine corners, measured again on the coarse
+/// corners and the pass redone if they give less than half that stride); when the two passes
+/// elect fewer than nine corners together, or the fine pass too few to give a step (every
+/// junction bridged by a print's dot gain), passes at strides 2, 4 and 8 are tried and the one
+/// electing the most corners is kept.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
     let fine = elect_at_one_scale(image, candidates, params);
     // With few fine corners the grid step they give may be off by squares (every junction can
@@ -400,8 +401,16 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     // pixels wide, and the centre test rejects them all but a few, far apart). If the coarse pass
     // at that step finds too few corners too, or there is no step, the coarse scale that elects
     // the most corners is taken, the finest on a tie.
-    let measured =
-        coarse_stride(&fine).map(|stride| (stride, elect_coarse(image, stride, stride, params)));
+    let measured = coarse_stride(&fine).map(|stride| {
+        let coarse = elect_coarse(image, stride, stride, params);
+        // The coarse corners, denser than the few fine ones, measure the step again: a stride
+        // of 16 on 100 px squares, say, whose coarse pass saw 6 px squares and elected a patch
+        // of the board, is redone at the stride they give.
+        match coarse_stride(&coarse) {
+            Some(again) if 2 * again < stride => (again, elect_coarse(image, again, again, params)),
+            _ => (stride, coarse),
+        }
+    });
     let (stride, mut all) = match measured {
         Some((stride, coarse)) if fine.len() + coarse.len() >= MIN_FINE_CORNERS => (stride, coarse),
         _ if fine.len() < MIN_FINE_CORNERS => FALLBACK_STRIDES
