@@ -32,6 +32,8 @@
 //!    the start of highest quick contrast on a ±0.2-step grid; such a corner must also be
 //!    confirmed within 1.5 px by the edge walks of (c) started from it, or by the junction model
 //!    ([`crate::junction`]) fitted within a quarter step with at least half the board's contrast.
+//!    A site whose full frame leaves the image (a board cut by the image's border) is retried
+//!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way.
 //!    An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
 //!    `k`) times `(−1)^(r+c)` is the same all over a board, and is taken from the board's own
 //!    corners by majority. A quick test on 5 samples per quadrant within 0.26 step (the quadrant
