@@ -455,7 +455,13 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
                     return curves(last);
                 };
-                curves(match (gradient_corner(image, pixel, g), board) {
+                // The gradient estimate is pulled towards a bridged junction's dark side as a
+                // one-sided answer is: its σ carries half the polarity offset too.
+                let gradient = gradient_corner(image, pixel, g).map(|mut gc| {
+                    gc.sigma = gc.sigma.map(|s| s.hypot(half_offset));
+                    gc
+                });
+                curves(match (gradient, board) {
                     // Two independent estimates that agree within the gradient estimate's σ:
                     // their mean. Where they disagree, the doubtful board-wide answer (short,
                     // extrapolated curves) is the likelier to be wrong.
