@@ -474,7 +474,7 @@ fn one_sided_answers_are_weighed_with_their_polarity_offset() {
 /// Under a 0.3 mm dot gain (a print that offsets the two polarities of every line by about
 /// 3 px) the outer column of this pose is placed from one side of its bridged junctions, 3–4 px
 /// off. The gradient estimate, pulled to the dark side as a one-sided answer is, claimed σ
-/// 0.18–0.20 px for 4 px; it now carries half the polarity offset in its σ, and no answer
+/// 0.18–0.20 px for 4 px; its reported σ now carries half the polarity offset, and no answer
 /// claims less than a third of its error.
 #[test]
 fn answers_beside_bridged_junctions_claim_the_polarity_offset() {
