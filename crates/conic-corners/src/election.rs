@@ -466,35 +466,33 @@ fn elect_coarse(
         return Vec::new();
     };
     let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
-    // Full-resolution coordinates of the saddle near pixel `(px, py)` of `img`, the image
-    // downsampled by `s` (whose pixel (u, v) covers the full-resolution centre s·(u, v) + (s−1)/2).
-    let saddle_at = |img: &GrayImage, s: usize, px: f64, py: f64| {
+    // Full-resolution coordinates of the saddle near the full-resolution point `(x, y)` at
+    // stride `s` (whose pixel (u, v) covers the full-resolution centre s·(u, v) + (s−1)/2).
+    let saddle_near = |s: usize, x: f64, y: f64| {
         let (sf, offset) = (s as f64, 0.5 * (s as f64 - 1.0));
-        if px < 0.0 || py < 0.0 {
+        let (px, py) = (((x - offset) / sf).round(), ((y - offset) / sf).round());
+        if !(px >= 0.0 && py >= 0.0) {
             return None;
         }
-        let (u, v) = saddle_point(img, px as usize, py as usize)?;
+        let (u, v) = saddle_at_stride(image, s, px as usize, py as usize)?;
         Some((sf * u + offset, sf * v + offset))
     };
     let mut corners: Vec<Corner> = elect_at_one_scale(&coarse, &coarse_candidates, params)
         .into_iter()
         .filter_map(|c| {
-            let (x, y) = saddle_at(&coarse, stride, c.x, c.y)?;
-            Some(Corner { x, y, ..c })
+            let (u, v) = saddle_point(&coarse, c.x as usize, c.y as usize)?;
+            let (sf, offset) = (stride as f64, 0.5 * (stride as f64 - 1.0));
+            Some(Corner {
+                x: sf * u + offset,
+                y: sf * v + offset,
+                ..c
+            })
         })
         .collect();
     let mut s = stride / 2;
     while s >= finest.max(1) {
-        let finer = if s == 1 {
-            None
-        } else {
-            box_downsample(image, s)
-        };
-        let img = finer.as_ref().unwrap_or(image);
-        let (sf, offset) = (s as f64, 0.5 * (s as f64 - 1.0));
         for c in &mut corners {
-            let (px, py) = (((c.x - offset) / sf).round(), ((c.y - offset) / sf).round());
-            if let Some((x, y)) = saddle_at(img, s, px, py) {
+            if let Some((x, y)) = saddle_near(s, c.x, c.y) {
                 (c.x, c.y) = (x, y);
             }
         }
@@ -637,19 +635,55 @@ impl CornerGrid {
 /// on the 5 × 5 window (`∇(αx² + βxy + γy² + δx + εy) = 0`), if it is a saddle within a pixel of
 /// `(x, y)`; otherwise the pixel itself. `None` only if the window leaves the image.
 fn saddle_point(image: &GrayImage, x: usize, y: usize) -> Option<(f64, f64)> {
-    let half = 2;
-    if x < half || y < half || x + half >= image.width() || y + half >= image.height() {
+    saddle_at_stride(image, 1, x, y)
+}
+
+/// [`saddle_point`] at pixel `(x, y)` of `image` box-downsampled by `s` (its pixel `(u, v)` the
+/// mean of the full-resolution block `s·u .. s·u + s` in each axis, as [`box_downsample`] makes
+/// it, with the same order of summation), in that image's coordinates. Only the 5 × 5 blocks
+/// around the pixel are read, so a few corners refined at several scales cost no downsampled
+/// copies of a large image.
+fn saddle_at_stride(image: &GrayImage, s: usize, x: usize, y: usize) -> Option<(f64, f64)> {
+    const HALF: usize = 2;
+    const SIDE: usize = 2 * HALF + 1;
+    let (w, h) = (image.width() / s.max(1), image.height() / s.max(1));
+    if s == 0 || x < HALF || y < HALF || x + HALF >= w || y + HALF >= h {
         return None;
     }
-    let proj = surface_projector(half);
-    let side = 2 * half + 1;
-    let mut k = [0f64; 5];
-    for r in 0..side {
-        let row = &image.row(y - half + r)[x - half..=x + half];
-        for (c, &v) in row.iter().enumerate() {
-            for (kk, p) in k.iter_mut().zip(proj.iter()) {
-                *kk += p[r * side + c] * v as f64;
+    let norm = 1.0 / (s * s) as f32;
+    let mut patch = [0f32; SIDE * SIDE];
+    let mut acc = Vec::new();
+    for r in 0..SIDE {
+        let (row0, col0) = ((y - HALF + r) * s, (x - HALF) * s);
+        let dst = &mut patch[r * SIDE..(r + 1) * SIDE];
+        match s {
+            1 => dst.copy_from_slice(&image.row(row0)[col0..col0 + SIDE]),
+            2 => {
+                let (a, b) = (image.row(row0), image.row(row0 + 1));
+                for (c, d) in dst.iter_mut().enumerate() {
+                    let i = col0 + 2 * c;
+                    *d = ((a[i] + a[i + 1]) + (b[i] + b[i + 1])) * norm;
+                }
             }
+            _ => {
+                acc.clear();
+                acc.resize(SIDE * s, 0f32);
+                for k in 0..s {
+                    for (a, &v) in acc.iter_mut().zip(&image.row(row0 + k)[col0..]) {
+                        *a += v;
+                    }
+                }
+                for (d, run) in dst.iter_mut().zip(acc.chunks_exact(s)) {
+                    *d = run.iter().sum::<f32>() * norm;
+                }
+            }
+        }
+    }
+    let proj = surface_projector(HALF);
+    let mut k = [0f64; 5];
+    for (i, &v) in patch.iter().enumerate() {
+        for (kk, p) in k.iter_mut().zip(proj.iter()) {
+            *kk += p[i] * v as f64;
         }
     }
     let [a, b, g, d, e] = k;
