@@ -480,13 +480,10 @@ fn elect_coarse(
     let mut corners: Vec<Corner> = elect_at_one_scale(&coarse, &coarse_candidates, params)
         .into_iter()
         .filter_map(|c| {
-            let (u, v) = saddle_point(&coarse, c.x as usize, c.y as usize)?;
+            // `c` is at a pixel of `coarse`: its full-resolution centre, then its saddle.
             let (sf, offset) = (stride as f64, 0.5 * (stride as f64 - 1.0));
-            Some(Corner {
-                x: sf * u + offset,
-                y: sf * v + offset,
-                ..c
-            })
+            let (x, y) = saddle_near(stride, sf * c.x + offset, sf * c.y + offset)?;
+            Some(Corner { x, y, ..c })
         })
         .collect();
     let mut s = stride / 2;
@@ -631,16 +628,12 @@ impl CornerGrid {
     }
 }
 
-/// Subpixel saddle point near pixel `(x, y)`: the stationary point of the quadratic surface fitted
-/// on the 5 × 5 window (`∇(αx² + βxy + γy² + δx + εy) = 0`), if it is a saddle within a pixel of
-/// `(x, y)`; otherwise the pixel itself. `None` only if the window leaves the image.
-fn saddle_point(image: &GrayImage, x: usize, y: usize) -> Option<(f64, f64)> {
-    saddle_at_stride(image, 1, x, y)
-}
-
-/// [`saddle_point`] at pixel `(x, y)` of `image` box-downsampled by `s` (its pixel `(u, v)` the
-/// mean of the full-resolution block `s·u .. s·u + s` in each axis, as [`box_downsample`] makes
-/// it, with the same order of summation), in that image's coordinates. Only the 5 × 5 blocks
+/// Subpixel saddle point near pixel `(x, y)` of `image` box-downsampled by `s` (its pixel `(u, v)`
+/// the mean of the full-resolution block `s·u .. s·u + s` in each axis, as [`box_downsample`]
+/// makes it, with the same order of summation), in that image's coordinates: the stationary point
+/// of the quadratic surface fitted on the 5 × 5 window (`∇(αx² + βxy + γy² + δx + εy) = 0`), if it
+/// is a saddle within a pixel of `(x, y)`; otherwise the pixel itself. `None` only if the window
+/// leaves the downsampled image. Only the 5 × 5 blocks
 /// around the pixel are read, so a few corners refined at several scales cost no downsampled
 /// copies of a large image.
 fn saddle_at_stride(image: &GrayImage, s: usize, x: usize, y: usize) -> Option<(f64, f64)> {
