@@ -933,21 +933,16 @@ mod tests {
     }
 
     #[test]
-    fn nothing_is_added_to_a_complete_board_and_it_is_fast() {
+    fn nothing_is_added_to_a_complete_board() {
         let (image, _, mut corners, mut boards) =
             labelled(&speed_benchmark_scene(), SPEED_BENCHMARK_NOISE_SEED);
         let before = boards.clone();
-        let t = std::time::Instant::now();
         let added = complete_boards(
             &image,
             &mut corners,
             &mut boards,
             &CompletionParams::default(),
         );
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        eprintln!("completion of a complete board: {ms:.3} ms");
-        // A loose bound (shared machine): about 0.3 ms measured.
-        assert!(ms < 20.0, "{ms} ms");
         assert_eq!(added, 0);
         assert_eq!(boards, before);
     }

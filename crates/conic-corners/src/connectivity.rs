@@ -1347,7 +1347,7 @@ mod tests {
     }
 
     #[test]
-    fn five_hundred_corners_are_fast() {
+    fn five_hundred_corners_under_perspective_form_one_board() {
         let mut rng = ChaCha8Rng::seed_from_u64(15);
         let (c, _) = grid(
             20,
@@ -1357,19 +1357,10 @@ mod tests {
             0.2,
             0.03,
         );
-        let p = ConnectivityParams::default();
-        let reps = 50;
-        let t0 = std::time::Instant::now();
-        let mut total = 0;
-        for _ in 0..reps {
-            let g = connect(&c, &p);
-            total += label(&c, &g)[0].corners.len();
-        }
-        let per = t0.elapsed().as_secs_f64() / reps as f64;
-        assert_eq!(total, 500 * reps);
-        eprintln!("connect + label, 500 corners: {:.3} ms", per * 1e3);
-        // Loose bound: the test machine is shared; see the report for the measured figure.
-        assert!(per < 0.01, "{per} s");
+        // Speed is the criterion benchmark's business (`cargo bench`); this checks the answer.
+        let boards = label(&c, &connect(&c, &ConnectivityParams::default()));
+        assert_eq!(boards.len(), 1);
+        assert_eq!(boards[0].corners.len(), 500);
     }
 
     proptest! {
