@@ -691,16 +691,16 @@ fn complete_one(
                 };
                 let refined = REACHES.into_iter().find_map(|k| {
                     let r = refine_one(image, q, &refine_at(k, params.max_offset * step));
-                    (r.status != Status::Failed).then_some([r.x, r.y])
+                    (r.status != Status::Failed).then_some(([r.x, r.y], r.status))
                 });
                 let last_resort = || {
                     let g = GradientParams {
                         max_shift: params.max_offset * step,
                         ..params.gradient.clone()?
                     };
-                    refine_gradient(image, q, &g).map(|c| c.point)
+                    refine_gradient(image, q, &g).map(|c| (c.point, Status::Fallback))
                 };
-                let z = refined.or_else(last_resort)?;
+                let (z, status) = refined.or_else(last_resort)?;
                 if norm(sub(z, p)) > params.max_offset * step {
                     return None;
                 }
@@ -742,6 +742,16 @@ fn complete_one(
                     })
                 };
                 if narrow && !confirmed() && !junction_confirms() {
+                    return None;
+                }
+                // A site beyond the board's outer ring, verified in the full frame, grows the
+                // board: there a border square's outer corner next to an occluder or the
+                // background passes the verification too, and a one-sided walk or the gradient
+                // estimate placed it (110 px from any true corner, claiming σ 0.06 px). Only
+                // edges that go on past the corner on both sides, or the junction model, tell
+                // a junction from it.
+                let grows = t.0 < r0 || t.0 > r1 || t.1 < c0 || t.1 > c1;
+                if grows && !narrow && status != Status::Converged && !junction_confirms() {
                     return None;
                 }
                 let corner = Corner {
