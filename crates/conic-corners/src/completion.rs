@@ -48,7 +48,10 @@
 //!    step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an occluder cut
 //!    the edges) to a corner that is not [`Status::Failed`], or failing that by the gradient
 //!    estimate ([`crate::gradient`]: blurred or foreshortened junctions, as in the outer ring of
-//!    a bent board, leave the edge walks nothing to fit), within `max_offset` steps of `p̂`.
+//!    a bent board, leave the edge walks nothing to fit), within `max_offset` steps of `p̂`. A
+//!    site outside the board's current label range, verified in the full frame, grows the
+//!    board: it needs a converged (two-sided) answer of [`refine_one`] or the junction model's
+//!    confirmation, since a border square's outer corner next to an occluder passes (a) and (b).
 //! 4. **Acceptance.** A verified corner more than half a step from every corner of every board is
 //!    appended to `corners` (angles from `u` and `v`, score the correlation of (b)) and joins the
 //!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
