@@ -633,9 +633,8 @@ impl CornerGrid {
 /// makes it, with the same order of summation), in that image's coordinates: the stationary point
 /// of the quadratic surface fitted on the 5 × 5 window (`∇(αx² + βxy + γy² + δx + εy) = 0`), if it
 /// is a saddle within a pixel of `(x, y)`; otherwise the pixel itself. `None` only if the window
-/// leaves the downsampled image. Only the 5 × 5 blocks
-/// around the pixel are read, so a few corners refined at several scales cost no downsampled
-/// copies of a large image.
+/// leaves the downsampled image. Only the 5 × 5 blocks around the pixel are read, so a few
+/// corners refined at several scales cost no downsampled copies of a large image.
 fn saddle_at_stride(image: &GrayImage, s: usize, x: usize, y: usize) -> Option<(f64, f64)> {
     const HALF: usize = 2;
     const SIDE: usize = 2 * HALF + 1;
