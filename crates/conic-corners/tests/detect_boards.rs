@@ -553,7 +553,11 @@ fn an_outer_corner_cut_by_a_stroke_is_not_completed() {
             ..DetectParams::default()
         },
     );
-    check("stroke through an outer corner, unplaced kept", &kept, &r.corners);
+    check(
+        "stroke through an outer corner, unplaced kept",
+        &kept,
+        &r.corners,
+    );
     let det = detect(&r.image, &DetectParams::default());
     let o = check("stroke through an outer corner", &det, &r.corners);
     assert_eq!(o.missing, 0);
