@@ -4,7 +4,7 @@
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
 use crate::board_fit::{fit_board_full, BoardFitParams, Path};
-use crate::completion::{complete_boards, drop_phase_contradictions, CompletionParams};
+use crate::completion::{complete_boards, split_by_phase, CompletionParams};
 use crate::connectivity::{
     connect, label_with, Board as LabelledBoard, ConnectivityParams, LabelParams,
 };
@@ -254,9 +254,9 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     // Completed corners are appended to `corners` (beyond `graph`'s range) and go through the
     // same refinement as the others.
     let t = Instant::now();
-    // Before completion, so that the corners of a board dropped for its labels are free to be
+    // Before completion, so that the corners of a piece dropped for its labels are free to be
     // completed into the board they belong to.
-    drop_phase_contradictions(image, &corners, &mut labelled);
+    split_by_phase(image, &corners, &mut labelled);
     complete_boards(image, &mut corners, &mut labelled, &params.completion);
     let completion_ms = ms(t);
     // Board mode fits the grid lines from the pixel-level corners (the walks measure the edges
