@@ -137,9 +137,9 @@ impl GrayImage {
     /// `round(255 · (k_r r + k_g g + k_b b))` with each channel scaled to [0, 1], the weights `k`
     /// of the image's colour space and the same `f32` operations in the same order. The crate
     /// rounds through `roundf`, a library call per pixel on baseline x86-64; here the rounding
-    /// is a few comparisons, which vectorize. Bit-identical matters: on
-    /// real photos some corners sit where a one-level change of a few pixels switches how they
-    /// are refined (`BENCHMARKS.md`, "grey conversion").
+    /// is a few comparisons, which vectorize. Bit-identical matters: on real photos some corners
+    /// sit where a one-level change of a few pixels switches how they are refined
+    /// (`BENCHMARKS.md`, "grey conversion").
     fn from_rgb8<const CH: usize>(
         width: usize,
         height: usize,
