@@ -509,6 +509,9 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             }
         }
     }
+    // Completion, dropping and the phase check change the sizes the labelling ordered by (a
+    // stable sort: ties keep the labelling's order).
+    boards.sort_by_key(|b| std::cmp::Reverse(b.corners.len()));
     Detection {
         boards,
         timing: Timing {

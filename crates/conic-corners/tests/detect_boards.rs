@@ -237,6 +237,7 @@ fn two_boards_side_by_side() {
     let image = GrayImage::from_vec(2 * w, h, data).unwrap();
     let det = detect(&image, &DetectParams::default());
     assert_eq!(det.boards.len(), 2);
+    assert!(det.boards[0].corners.len() >= det.boards[1].corners.len());
     // Check each half against its own truth, the other board's corners filtered out by side.
     for (half, truth) in [(0, &left.corners), (1, &right.corners)] {
         let mut sub = Detection {
