@@ -1546,7 +1546,7 @@ fn across_inflection(
     let (a, b) = (pair[0].samples.0, pair[1].samples.1);
     let mut best: Option<(Chosen, f64)> = None;
     let mut keep = |curve: Curve, variance: f64, bound: f64| {
-        if variance.is_finite() && best.as_ref().is_none_or(|(_, bb)| bound < *bb) {
+        if variance.is_finite() && best.as_ref().map_or(true, |(_, bb)| bound < *bb) {
             best = Some((Chosen { curve, variance }, bound));
         }
     };

@@ -1326,13 +1326,14 @@ mod tests {
             }
         }
         let free = fit_sigmoid(&step, None);
-        assert!(free.is_none_or(|f| f.position.is_finite() && (f.position - 11.5).abs() <= 0.5));
+        assert!(free.map_or(true, |f| f.position.is_finite()
+            && (f.position - 11.5).abs() <= 0.5));
         let far = profile(25, 60.0, 1.0, 0.0, 1.0);
         assert!(fit_sigmoid(&far, Some(0.01)).is_none());
         assert!(fit_sigmoid(&far, None).is_none());
         // Equal projected sums on both sides: the closed-form step must not divide by zero.
         let two_level: Vec<f32> = (0..25).map(|i| (i % 2) as f32).collect();
-        assert!(fit_sigmoid(&two_level, Some(1.0)).is_none_or(|f| f.position.is_finite()));
+        assert!(fit_sigmoid(&two_level, Some(1.0)).map_or(true, |f| f.position.is_finite()));
     }
 
     #[test]
@@ -1474,7 +1475,7 @@ mod tests {
         let params = SigmoidParams::default();
         let full = sample_edge_with(&img, [e1, 10.0], t, 8, Some(c), &params);
         assert!(
-            full.is_none_or(|s| (s.point[0] - e1).abs() > 0.05),
+            full.map_or(true, |s| (s.point[0] - e1).abs() > 0.05),
             "{full:?}"
         );
         let bounds = ScanBounds {
