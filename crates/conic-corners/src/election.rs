@@ -392,8 +392,10 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// squares (its stride from the grid step of the fine corners, measured again on the coarse
 /// corners and the pass redone if they give less than half that stride); when the two passes
 /// elect fewer than nine corners together, or the fine pass too few to give a step (every
-/// junction bridged by a print's dot gain), passes at strides 2, 4 and 8 are tried and the one
-/// electing the most corners is kept.
+/// junction bridged by a print's dot gain), or no step and fewer corners than an eighth of the
+/// candidates (motion blur along the squares' diagonals averages two quadrants of one colour
+/// into every junction's centre, which the centre test takes for a stroke), passes at strides
+/// 2, 4 and 8 are tried and the one electing the most corners is kept.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
     let fine = elect_at_one_scale(image, candidates, params);
     // With few fine corners the grid step they give may be off by squares (every junction can
@@ -411,9 +413,13 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
             _ => (stride, coarse),
         }
     });
+    // The pre-filter keeps about two candidates per board corner: a fine pass that elects under
+    // a quarter of that, with no coarse stride to fill its gaps, failed on most junctions.
+    let few = fine.len() < MIN_FINE_CORNERS
+        || (measured.is_none() && fine.len() * FEW_FINE_OF_CANDIDATES < candidates.len());
     let (stride, mut all) = match measured {
         Some((stride, coarse)) if fine.len() + coarse.len() >= MIN_FINE_CORNERS => (stride, coarse),
-        _ if fine.len() < MIN_FINE_CORNERS => FALLBACK_STRIDES
+        _ if few => FALLBACK_STRIDES
             .iter()
             .map(|&stride| {
                 (
@@ -444,6 +450,9 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
 /// With fewer fine and coarse corners than a 3 × 3 patch of a board, the coarse passes of
 /// [`FALLBACK_STRIDES`] are tried.
 const MIN_FINE_CORNERS: usize = 9;
+/// A fine pass electing fewer corners than the candidates over this, where the fine corners
+/// give no coarse stride, is retried at the [`FALLBACK_STRIDES`] too.
+const FEW_FINE_OF_CANDIDATES: usize = 8;
 /// Strides of the coarse passes tried when the fine pass elects too few corners.
 const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
 

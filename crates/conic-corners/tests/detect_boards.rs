@@ -805,3 +805,78 @@ fn one_sided_local_answers_yield_to_a_surer_gradient_estimate() {
     }
     assert!(matched >= 60, "{matched} corners matched");
 }
+
+/// The image `img` blurred by a box of `2·half + 1` samples along its diagonal (x and y together),
+/// as a camera moving diagonally during the exposure would.
+fn diagonal_motion_blur(img: &GrayImage, half: isize) -> GrayImage {
+    let (w, h) = (img.width(), img.height());
+    let mut data = vec![0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (mut sum, mut n) = (0.0, 0.0);
+            for k in -half..=half {
+                if let Some(v) = img.get_checked(x as isize + k, y as isize + k) {
+                    sum += v;
+                    n += 1.0;
+                }
+            }
+            data[y * w + x] = sum / n;
+        }
+    }
+    GrayImage::from_vec(w, h, data).unwrap()
+}
+
+/// The bundled photo at half size with motion blur along the squares' diagonals (5 samples,
+/// 7 px): each junction's centre averages two quadrants of one colour, and the fine election's
+/// tests reject all but a dozen junctions, too few and too scattered to give a coarse stride.
+/// The coarse passes, where the blur is a few pixels less, still find the board.
+#[test]
+fn diagonal_motion_blur_on_the_bundled_photo_keeps_the_board() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/curve_4.jpg");
+    let full = GrayImage::open(path).unwrap();
+    let (w, h) = (full.width() / 2, full.height() / 2);
+    let mut half = vec![0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            half[y * w + x] = 0.25
+                * (full.get(2 * x, 2 * y)
+                    + full.get(2 * x + 1, 2 * y)
+                    + full.get(2 * x, 2 * y + 1)
+                    + full.get(2 * x + 1, 2 * y + 1));
+        }
+    }
+    let blurred = diagonal_motion_blur(&GrayImage::from_vec(w, h, half).unwrap(), 2);
+    let det = detect(&blurred, &DetectParams::default());
+    let sizes: Vec<usize> = det.boards.iter().map(|b| b.corners.len()).collect();
+    eprintln!("boards: {sizes:?}");
+    assert!(sizes.first().is_some_and(|&n| n >= 80), "{sizes:?}");
+    // Every corner is one of the sharp photo's (a half-size pixel covers two full ones:
+    // x_half = (x − 0.5)/2) with the same label up to one shift. The refiners model isotropic
+    // blur, so under this blur some answers move by pixels (up to 4.4 px, at the S's fold and on
+    // the bottom row, where the blur runs along an edge); most stay within a pixel.
+    let sharp = detect(&full, &DetectParams::default());
+    let mut shifts = std::collections::HashSet::new();
+    let mut within_px = 0;
+    for c in &det.boards[0].corners {
+        let (d, s) = sharp.boards[0]
+            .corners
+            .iter()
+            .map(|t| {
+                let (x, y) = ((t.x - 0.5) / 2.0, (t.y - 0.5) / 2.0);
+                ((x - c.x).hypot(y - c.y), (t.row - c.row, t.col - c.col))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap();
+        assert!(
+            d <= 5.0,
+            "({}, {}) is {d:.2} px from the sharp corner",
+            c.row,
+            c.col
+        );
+        within_px += usize::from(d <= 1.0);
+        shifts.insert(s);
+    }
+    let n = det.boards[0].corners.len();
+    assert!(10 * within_px >= 9 * n, "{within_px} of {n} within 1 px");
+    assert_eq!(shifts.len(), 1, "{shifts:?}");
+}
