@@ -19,7 +19,8 @@
 //! columns beyond it were all one label off), or two squares at a time through a patch seen
 //! between occluders hiding alternate rows (a 1.2-megapixel copy of `marker_real3.jpg`). The
 //! board is then split into pieces of one phase connected by label steps of one; pieces of at
-//! least four corners over two rows and columns are kept as boards (the corners of the others
+//! least [`LabelParams::min_corners`](crate::connectivity::LabelParams) corners over two rows
+//! and columns are kept as boards (the corners of the others
 //! are then free for the completion of the board they belong to).
 //!
 //! Then, for every board, repeated for up to [`CompletionParams::rounds`] rounds (new corners
@@ -433,6 +434,12 @@ fn parity((r, c): Label) -> f64 {
     }
 }
 
+/// The [`junction`] at the labelled corner `t`, in the frame of its labelled neighbours' steps.
+fn labelled_junction(image: &GrayImage, grid: &Grid, t: Label) -> Option<Junction> {
+    let (p, (u, v)) = (grid.get(t)?, grid.frame(t)?);
+    junction(image, p, &Frame::symmetric(u, v))
+}
+
 /// Corners measured for the board's [`Reference`] (evenly spread over its label order).
 const REFERENCE_CORNERS: usize = 32;
 
@@ -442,10 +449,7 @@ fn reference(image: &GrayImage, grid: &Grid, labels: &[Label]) -> Option<Referen
     let stride = labels.len().div_ceil(REFERENCE_CORNERS).max(1);
     let mut measured = Vec::with_capacity(REFERENCE_CORNERS);
     for &t in labels.iter().step_by(stride) {
-        let (Some(p), Some((u, v))) = (grid.get(t), grid.frame(t)) else {
-            continue;
-        };
-        if let Some(j) = junction(image, p, &Frame::symmetric(u, v)) {
+        if let Some(j) = labelled_junction(image, grid, t) {
             measured.push((t, j));
         }
     }
@@ -482,10 +486,15 @@ const PHASE_DECIDED: f64 = 0.3;
 /// [module docs](self)). A board where every measured corner agrees is left alone. Otherwise
 /// its corners are grouped by phase (the undecided ones join their 4-neighbours' group), each
 /// group is split into pieces connected by label steps of one, and each piece with at least
-/// four corners over two rows and two columns becomes a board of its own (canonical labels,
-/// largest first, in place of the board); the rest are dropped. Returns the number of corners
-/// dropped.
-pub fn split_by_phase(image: &GrayImage, corners: &[Corner], boards: &mut Vec<Board>) -> usize {
+/// `min_corners` corners (the labelling's smallest board, [`crate::connectivity::LabelParams`])
+/// over two rows and two columns becomes a board of its own (canonical labels, largest first,
+/// in place of the board); the rest are dropped. Returns the number of corners dropped.
+pub fn split_by_phase(
+    image: &GrayImage,
+    corners: &[Corner],
+    boards: &mut Vec<Board>,
+    min_corners: usize,
+) -> usize {
     let before: usize = boards.iter().map(|b| b.corners.len()).sum();
     let mut out = Vec::with_capacity(boards.len());
     for board in boards.drain(..) {
@@ -504,13 +513,13 @@ pub fn split_by_phase(image: &GrayImage, corners: &[Corner], boards: &mut Vec<Bo
             .labels
             .iter()
             .map(|&t| {
-                let (p, (u, v)) = (grid.get(t)?, grid.frame(t)?);
-                let n = junction(image, p, &Frame::symmetric(u, v))?.ncc * parity(t);
+                let n = labelled_junction(image, &grid, t)?.ncc * parity(t);
                 (n.abs() >= PHASE_DECIDED).then_some(n > 0.0)
             })
             .collect();
-        let decided: Vec<bool> = sign.iter().flatten().copied().collect();
-        if decided.iter().all(|&s| s) || decided.iter().all(|&s| !s) {
+        let mut decided = sign.iter().flatten();
+        let first = decided.next();
+        if first.map_or(true, |&f| decided.all(|&s| s == f)) {
             out.push(board);
             continue;
         }
@@ -564,7 +573,7 @@ pub fn split_by_phase(image: &GrayImage, corners: &[Corner], boards: &mut Vec<Bo
                 cols: 0,
             };
             canonicalize(&mut piece);
-            if piece.corners.len() >= 4 && piece.rows >= 2 && piece.cols >= 2 {
+            if piece.corners.len() >= min_corners.max(1) && piece.rows >= 2 && piece.cols >= 2 {
                 pieces.push(piece);
             }
         }
@@ -1265,19 +1274,19 @@ mod tests {
             b
         };
         let mut kept = vec![whole.clone()];
-        assert_eq!(split_by_phase(&image, &corners, &mut kept), 0);
+        assert_eq!(split_by_phase(&image, &corners, &mut kept, 4), 0);
         assert_eq!(kept, [whole.clone()]);
 
         // True rows 0, 2, 4 and 6 labelled 0..3.
         let mut skipping = vec![relabelled(&|(r, c)| (r % 2 == 0).then_some((r / 2, c)))];
         let n = skipping[0].corners.len();
         assert!(n >= 30);
-        assert_eq!(split_by_phase(&image, &corners, &mut skipping), n);
+        assert_eq!(split_by_phase(&image, &corners, &mut skipping, 4), n);
         assert!(skipping.is_empty());
 
         // Columns from 5 on one label too far right.
         let mut halves = vec![relabelled(&|(r, c)| Some((r, c + i32::from(c >= 5))))];
-        assert_eq!(split_by_phase(&image, &corners, &mut halves), 0);
+        assert_eq!(split_by_phase(&image, &corners, &mut halves, 4), 0);
         assert_eq!(halves.len(), 2);
         assert_eq!(
             halves.iter().map(|b| b.corners.len()).sum::<usize>(),
@@ -1295,7 +1304,7 @@ mod tests {
         shifted.labels.remove(right);
         shifted.corners.remove(right);
         let mut boards = vec![shifted];
-        assert_eq!(split_by_phase(&image, &corners, &mut boards), 1);
+        assert_eq!(split_by_phase(&image, &corners, &mut boards, 4), 1);
         assert_eq!(boards.len(), 1);
         assert!(!boards[0].labels.contains(&(4, 5)));
         assert_eq!(boards[0].corners.len(), whole.corners.len() - 2);

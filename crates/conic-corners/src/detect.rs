@@ -256,7 +256,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     let t = Instant::now();
     // Before completion, so that the corners of a piece dropped for its labels are free to be
     // completed into the board they belong to.
-    split_by_phase(image, &corners, &mut labelled);
+    split_by_phase(image, &corners, &mut labelled, params.labels.min_corners);
     complete_boards(image, &mut corners, &mut labelled, &params.completion);
     let completion_ms = ms(t);
     // Board mode fits the grid lines from the pixel-level corners (the walks measure the edges

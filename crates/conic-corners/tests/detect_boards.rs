@@ -8,6 +8,7 @@
 //! shift (so truth neighbours differ by ±1 on one axis), and the refined positions' RMS error.
 
 use conic_corners::detect::{detect, DetectParams, Detection};
+use conic_corners::prefilter::box_downsample;
 use conic_corners::refine::Status;
 use conic_corners::synth::board::{
     random_board_scene, BoardCorner, BoardScene, Dots, Occluder, Surface,
@@ -834,18 +835,8 @@ fn diagonal_motion_blur(img: &GrayImage, half: isize) -> GrayImage {
 fn diagonal_motion_blur_on_the_bundled_photo_keeps_the_board() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/curve_4.jpg");
     let full = GrayImage::open(path).unwrap();
-    let (w, h) = (full.width() / 2, full.height() / 2);
-    let mut half = vec![0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            half[y * w + x] = 0.25
-                * (full.get(2 * x, 2 * y)
-                    + full.get(2 * x + 1, 2 * y)
-                    + full.get(2 * x, 2 * y + 1)
-                    + full.get(2 * x + 1, 2 * y + 1));
-        }
-    }
-    let blurred = diagonal_motion_blur(&GrayImage::from_vec(w, h, half).unwrap(), 2);
+    let half = box_downsample(&full, 2).unwrap();
+    let blurred = diagonal_motion_blur(&half, 2);
     let det = detect(&blurred, &DetectParams::default());
     let sizes: Vec<usize> = det.boards.iter().map(|b| b.corners.len()).collect();
     eprintln!("boards: {sizes:?}");
