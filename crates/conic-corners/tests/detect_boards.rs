@@ -303,8 +303,8 @@ fn real_photos_when_present() {
     // Labelled corners achieved (lower bounds); each photo shows one board.
     let expected = [
         ("curve_4.jpg", 110),
-        ("curve_5.jpg", 99),
-        ("curve_6.jpg", 103),
+        ("curve_5.jpg", 100),
+        ("curve_6.jpg", 104),
         ("curve_7.jpg", 102),
         ("curve_8.jpg", 102),
         ("marker_real.jpg", 94),
@@ -344,6 +344,18 @@ fn real_photos_when_present() {
                 .expect("corner (6, 8)");
             assert_eq!(c.status, Status::Converged, "{c:?}");
             assert!((c.x - 1938.5).hypot(c.y - 1459.0) < 1.5, "{c:?}");
+        }
+        if name == "curve_6.jpg" {
+            // A sliver 12 px wide at the S's silhouette: the edge walks from the site end 9 px
+            // off its junction, the gradient estimate lands on it and the junction model
+            // confirms it. The corner of the dark square above it, read off the pixels, is at
+            // about (402, 2019).
+            let c = det.boards[0]
+                .corners
+                .iter()
+                .find(|c| (c.row, c.col) == (5, 0))
+                .expect("corner (5, 0)");
+            assert!((c.x - 402.0).hypot(c.y - 2019.0) < 2.5, "{c:?}");
         }
         let hulls: Vec<_> = det
             .boards
