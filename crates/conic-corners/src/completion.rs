@@ -48,7 +48,9 @@
 //!    confirmed within 1.5 px by the edge walks of (c) started from it, or by the junction model
 //!    ([`crate::junction`]) fitted within a quarter step with at least half the board's contrast.
 //!    Where the walks' answer is not confirmed, the gradient estimate is the second candidate,
-//!    and only the junction model can confirm it.
+//!    and only the junction model can confirm it. Where a quarter step exceeds the model's wide
+//!    window, a fit within twice its window may confirm too, if its edges bend by at most
+//!    `|κ| r ≤ 0.5` across it.
 //!    A site whose full frame leaves the image (a board cut by the image's border) is retried
 //!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way.
 //!    An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
@@ -862,11 +864,28 @@ fn complete_one(
                             .filter_map(|(outer, step, edge)| Some((edge, outward(outer, step)?)))
                             .collect();
                         let angles = [angle(u), angle(v)];
-                        refine_junction_at_boundary(image, z, angles, radius, 1.0, &beyond, jp)
-                            .is_some_and(|j| {
-                                norm(sub(j.point, z)) <= SLIVER_CONFIRM_SHIFT
-                                    && j.contrast >= min_contrast
-                            })
+                        let confirms = |jp: &JunctionParams, max_bend: f64| {
+                            refine_junction_at_boundary(image, z, angles, radius, 1.0, &beyond, jp)
+                                .is_some_and(|j| {
+                                    norm(sub(j.point, z)) <= SLIVER_CONFIRM_SHIFT
+                                        && j.contrast >= min_contrast
+                                        && j.curvatures.iter().all(|k| k.abs() <= max_bend)
+                                })
+                        };
+                        // A junction beside a sliver as wide as the window or wider: the model
+                        // may need twice the window (`curve_6.jpg` (6, 0), a 12 px sliver, where
+                        // the fit within 6–10 px does not converge). There its edges must bend by
+                        // at most a quarter of the window's radius across it (`|κ| r ≤ 0.5`): an
+                        // occluder's edge meeting a border square fits the model with edges
+                        // bent at a radius of 8 px (a bar across an S-shaped board).
+                        let wider = (2.0 * jp.max_radius).min(32.0);
+                        let wider_params = JunctionParams {
+                            max_radius: wider,
+                            wide_radius: wider,
+                            ..jp.clone()
+                        };
+                        confirms(jp, f64::INFINITY)
+                            || (radius > jp.wide_radius && confirms(&wider_params, 0.5 / wider))
                     })
                 };
                 // On a sliver the walks' answer is tried first, then the gradient estimate: walks
