@@ -49,8 +49,8 @@
 //!    ([`crate::junction`]) fitted within a quarter step with at least half the board's contrast.
 //!    Where the walks' answer is not confirmed, the gradient estimate is the second candidate,
 //!    and only the junction model can confirm it. Where a quarter step exceeds the model's wide
-//!    window, a fit within twice its window may confirm too, if its edges bend by at most
-//!    `|κ| r ≤ 0.5` across it.
+//!    window, the plain model (no sliver edge) fitted within twice its window may confirm too,
+//!    if its edges bend by at most `|κ| r ≤ 0.5` across it.
 //!    A site whose full frame leaves the image (a board cut by the image's border) is retried
 //!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way.
 //!    An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
@@ -864,8 +864,10 @@ fn complete_one(
                             .filter_map(|(outer, step, edge)| Some((edge, outward(outer, step)?)))
                             .collect();
                         let angles = [angle(u), angle(v)];
-                        let confirms = |jp: &JunctionParams, max_bend: f64| {
-                            refine_junction_at_boundary(image, z, angles, radius, 1.0, &beyond, jp)
+                        let confirms = |jp: &JunctionParams,
+                                        beyond: &[(usize, P)],
+                                        max_bend: f64| {
+                            refine_junction_at_boundary(image, z, angles, radius, 1.0, beyond, jp)
                                 .is_some_and(|j| {
                                     norm(sub(j.point, z)) <= SLIVER_CONFIRM_SHIFT
                                         && j.contrast >= min_contrast
@@ -877,15 +879,18 @@ fn complete_one(
                         // the fit within 6–10 px does not converge). There its edges must bend by
                         // at most a quarter of the window's radius across it (`|κ| r ≤ 0.5`): an
                         // occluder's edge meeting a border square fits the model with edges
-                        // bent at a radius of 8 px (a bar across an S-shaped board).
+                        // bent at a radius of 8 px (a bar across an S-shaped board). The plain
+                        // model only: with the sliver fits too, the wider window took 13 ms of
+                        // `curve_6`'s completion (28 → 41 ms) and confirmed nothing more.
                         let wider = (2.0 * jp.max_radius).min(32.0);
                         let wider_params = JunctionParams {
                             max_radius: wider,
                             wide_radius: wider,
                             ..jp.clone()
                         };
-                        confirms(jp, f64::INFINITY)
-                            || (radius > jp.wide_radius && confirms(&wider_params, 0.5 / wider))
+                        confirms(jp, &beyond, f64::INFINITY)
+                            || (radius > jp.wide_radius
+                                && confirms(&wider_params, &[], 0.5 / wider))
                     })
                 };
                 // On a sliver the walks' answer is tried first, then the gradient estimate: walks
