@@ -332,39 +332,35 @@ fn real_photos_when_present() {
             .map(|c| (c.row, c.col))
             .collect();
         assert!(failed.is_empty(), "{name}: unplaced corners {failed:?}");
+        let corner = |label: (i32, i32)| {
+            det.boards[0]
+                .corners
+                .iter()
+                .find(|c| (c.row, c.col) == label)
+                .unwrap_or_else(|| panic!("{name}: corner {label:?}"))
+        };
         if name == "marker_real2.jpg" {
             // A pen stroke runs through the junction of (6, 8) and pulls the election's maximum
             // 11 px off it; the refiner's second start (from the neighbours) finds the junction.
             // Its centre, read off the pixel rows: the vertical edges at x = 1937.3 above and
             // 1939.6 below (dot gain), the horizontal edge at y = 1458.6.
-            let c = det.boards[0]
-                .corners
-                .iter()
-                .find(|c| (c.row, c.col) == (6, 8))
-                .expect("corner (6, 8)");
+            let c = corner((6, 8));
             assert_eq!(c.status, Status::Converged, "{c:?}");
             assert!((c.x - 1938.5).hypot(c.y - 1459.0) < 1.5, "{c:?}");
         }
         if name == "curve_6.jpg" {
-            // A sliver 12 px wide at the S's silhouette: the edge walks from the site end 9 px
-            // off its junction, the gradient estimate lands on it and the junction model
-            // confirms it. The corner of the dark square above it, read off the pixels, is at
-            // about (402, 2019).
-            let c = det.boards[0]
-                .corners
-                .iter()
-                .find(|c| (c.row, c.col) == (5, 0))
-                .expect("corner (5, 0)");
-            assert!((c.x - 402.0).hypot(c.y - 2019.0) < 2.5, "{c:?}");
-            // Below it, beside the same sliver: (6, 0) needs the junction model's wider window
-            // to confirm it, and (7, 0) is then predicted and confirmed. On 4× crops their
-            // junctions are at about (416, 2186) and (426.3, 2340.5).
-            for (label, at) in [((6, 0), [416.0, 2186.0]), ((7, 0), [426.3, 2340.5])] {
-                let c = det.boards[0]
-                    .corners
-                    .iter()
-                    .find(|c| (c.row, c.col) == label)
-                    .unwrap_or_else(|| panic!("corner {label:?}"));
+            // Beside a sliver 12 px wide at the S's silhouette. (5, 0): the edge walks from the
+            // site end 9 px off its junction, the gradient estimate lands on it and the junction
+            // model confirms it; the corner of the dark square above it, read off the pixels, is
+            // at about (402, 2019). (6, 0) needs the junction model's wider window to confirm
+            // it, and (7, 0) is then predicted and confirmed; on 4× crops their junctions are at
+            // about (416, 2186) and (426.3, 2340.5).
+            for (label, at) in [
+                ((5, 0), [402.0, 2019.0]),
+                ((6, 0), [416.0, 2186.0]),
+                ((7, 0), [426.3, 2340.5]),
+            ] {
+                let c = corner(label);
                 assert!((c.x - at[0]).hypot(c.y - at[1]) < 2.5, "{c:?}");
             }
         }
