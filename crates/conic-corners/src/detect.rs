@@ -8,10 +8,10 @@ use crate::completion::{complete_boards, split_by_phase, CompletionParams};
 use crate::connectivity::{
     connect, label_with, Board as LabelledBoard, ConnectivityParams, LabelParams,
 };
-use crate::election::{elect, Corner, ElectionParams};
+use crate::election::{elect_scales, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
-use crate::prefilter::{prefilter, PrefilterParams};
+use crate::prefilter::{prefilter_scales, PrefilterParams, Scales};
 use crate::quadratic_form::worst_sigma;
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
@@ -242,10 +242,12 @@ fn ms(since: Instant) -> f64 {
 /// ([`DetectParams::validate`]); an image without a board gives no boards.
 pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     let t0 = Instant::now();
-    let candidates = prefilter(image, &params.prefilter);
+    let scales = Scales::new(image);
+    let candidates = prefilter_scales(&scales, &params.prefilter);
     let prefilter_ms = ms(t0);
     let t = Instant::now();
-    let mut corners = elect(image, &candidates, &params.election);
+    let mut corners = elect_scales(&scales, &candidates, &params.election);
+    drop(scales); // the average, a quarter of the image, is not needed further on
     let election_ms = ms(t);
     let t = Instant::now();
     let graph = connect(&corners, &params.connectivity);

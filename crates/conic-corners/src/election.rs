@@ -5,7 +5,7 @@
 //!
 //! Positions are image coordinates (x right, y down, pixel centres at integers).
 
-use crate::prefilter::{box_downsample, prefilter, Candidate, PrefilterParams};
+use crate::prefilter::{prefilter_scales, Candidate, PrefilterParams, Scales};
 use crate::GrayImage;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -397,6 +397,16 @@ fn centre_is_consistent(patch: &[f32; TEMPLATE_LEN], e: usize, d: usize, max_rel
 /// into every junction's centre, which the centre test takes for a stroke), passes at strides
 /// 2, 4 and 8 are tried and the one electing the most corners is kept.
 pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParams) -> Vec<Corner> {
+    elect_scales(&Scales::new(image), candidates, params)
+}
+
+/// [`elect`] on `scales.image()`, a coarse pass at stride 2 on the average kept in `scales`.
+pub fn elect_scales(
+    scales: &Scales,
+    candidates: &[Candidate],
+    params: &ElectionParams,
+) -> Vec<Corner> {
+    let image = scales.image();
     let fine = elect_at_one_scale(image, candidates, params);
     // With few fine corners the grid step they give may be off by squares (every junction can
     // fail the fine tests at once: a print's dot gain joins the dark squares by a bridge a few
@@ -404,12 +414,14 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
     // at that step finds too few corners too, or there is no step, the coarse scale that elects
     // the most corners is taken, the finest on a tie.
     let measured = coarse_stride(&fine).map(|stride| {
-        let coarse = elect_coarse(image, stride, stride, params);
+        let coarse = elect_coarse(scales, stride, stride, params);
         // The coarse corners, denser than the few fine ones, measure the step again: a stride
         // of 16 on 100 px squares, say, whose coarse pass saw 6 px squares and elected a patch
         // of the board, is redone at the stride they give.
         match coarse_stride(&coarse) {
-            Some(again) if 2 * again < stride => (again, elect_coarse(image, again, again, params)),
+            Some(again) if 2 * again < stride => {
+                (again, elect_coarse(scales, again, again, params))
+            }
             _ => (stride, coarse),
         }
     });
@@ -424,7 +436,7 @@ pub fn elect(image: &GrayImage, candidates: &[Candidate], params: &ElectionParam
             .map(|&stride| {
                 (
                     stride,
-                    elect_coarse(image, stride, FINEST_SADDLE_STRIDE, params),
+                    elect_coarse(scales, stride, FINEST_SADDLE_STRIDE, params),
                 )
             })
             .fold((1, Vec::new()), |best, next| {
@@ -465,16 +477,19 @@ const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
 /// rough a start for the edge walks; where the fine pass worked, the coarse corners only fill
 /// its gaps and keep their coarse saddle point (`finest = stride`).
 fn elect_coarse(
-    image: &GrayImage,
+    scales: &Scales,
     stride: usize,
     finest: usize,
     params: &ElectionParams,
 ) -> Vec<Corner> {
-    let Some(coarse) = box_downsample(image, stride).filter(|c| c.width().min(c.height()) >= 16)
+    let image = scales.image();
+    let Some(coarse) = scales
+        .downsampled(stride)
+        .filter(|c| c.width().min(c.height()) >= 16)
     else {
         return Vec::new();
     };
-    let coarse_candidates = prefilter(&coarse, &PrefilterParams::default());
+    let coarse_candidates = prefilter_scales(&Scales::new(&coarse), &PrefilterParams::default());
     // Full-resolution coordinates of the saddle near the full-resolution point `(x, y)` at
     // stride `s` (whose pixel (u, v) covers the full-resolution centre s·(u, v) + (s−1)/2).
     let saddle_near = |s: usize, x: f64, y: f64| {
@@ -638,7 +653,7 @@ impl CornerGrid {
 }
 
 /// Subpixel saddle point near pixel `(x, y)` of `image` box-downsampled by `s` (its pixel `(u, v)`
-/// the mean of the full-resolution block `s·u .. s·u + s` in each axis, as [`box_downsample`]
+/// the mean of the full-resolution block `s·u .. s·u + s` in each axis, as [`crate::prefilter::box_downsample`]
 /// makes it, with the same order of summation), in that image's coordinates: the stationary point
 /// of the quadratic surface fitted on the 5 × 5 window (`∇(αx² + βxy + γy² + δx + εy) = 0`), if it
 /// is a saddle within a pixel of `(x, y)`; otherwise the pixel itself. `None` only if the window
@@ -765,20 +780,23 @@ fn deduplicate(sorted: Vec<Corner>, radius: f64) -> Vec<Corner> {
     kept
 }
 
-/// Pixel-level checkerboard corners of `image`: [`prefilter`] then [`elect`]. Positions are
-/// integer pixels (the corner lies within about a pixel); refine them with [`crate::refine`].
+/// Pixel-level checkerboard corners of `image`: [`crate::prefilter::prefilter`] then [`elect`].
+/// Positions are integer pixels (the corner lies within about a pixel); refine them with
+/// [`crate::refine`].
 pub fn find_corners(
     image: &GrayImage,
     prefilter_params: &PrefilterParams,
     election_params: &ElectionParams,
 ) -> Vec<Corner> {
-    let candidates = prefilter(image, prefilter_params);
-    elect(image, &candidates, election_params)
+    let scales = Scales::new(image);
+    let candidates = prefilter_scales(&scales, prefilter_params);
+    elect_scales(&scales, &candidates, election_params)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::prefilter::prefilter;
 
     fn angle_diff(a: f64, b: f64) -> f64 {
         let d = (a - b).rem_euclid(PI);
