@@ -47,29 +47,29 @@ pub struct DetectParams {
     /// The junction-model refiner ([`crate::junction`]): it places the corners whose edge walks
     /// are one-sided or failed, before the gradient estimate is tried, and it is combined by
     /// inverse covariances with the board-wide answers whose σ is above
-    /// [`DetectParams::junction_gate`] times their board's median (taking the one with the
-    /// smaller σ where the two disagree). `None` disables it.
+    /// [`DetectParams::junction_gate`] times their board's median σ, at most 0.1 px (taking the
+    /// one with the smaller σ where the two disagree). `None` disables it.
     pub junction: Option<JunctionParams>,
-    /// A board-wide answer whose σ exceeds this multiple of its board's median σ (less support
-    /// than most: curved, short or extrapolated lines) is combined with the junction model's
-    /// answer. Default 1.5. Lower is more accurate and slower: at 1.0 (measured at `b03cdf6`)
-    /// the curved-board benchmark's corners go 0.0072 → 0.0067 px RMS (flattest curvature bin 0.0067 → 0.0062,
-    /// top bin 0.0154 → 0.0141, stereo reprojection 0.0040 → 0.0036 px) and the robustness
-    /// report's geometric mean 0.0196 → 0.0195 px, but `detect` on the speed benchmark's flat
-    /// board takes about 5 ms more (half its corners get a junction fit) and on `curve_6.jpg`
-    /// 10 ms more (one thread). `∞` combines only the doubtful answers.
+    /// A board-wide answer whose σ exceeds this multiple of its board's median σ (at most 0.1 px;
+    /// less support than most: curved, short or extrapolated lines) is combined with the junction
+    /// model's answer. Default 1.5. Lower is more accurate and slower: at 1.0 (measured at
+    /// `b03cdf6`) the curved-board benchmark's corners go 0.0072 → 0.0067 px RMS (flattest
+    /// curvature bin 0.0067 → 0.0062, top bin 0.0154 → 0.0141, stereo reprojection 0.0040 → 0.0036
+    /// px) and the robustness report's geometric mean 0.0196 → 0.0195 px, but `detect` on the speed
+    /// benchmark's flat board takes about 5 ms more (half its corners get a junction fit) and on
+    /// `curve_6.jpg` 10 ms more (one thread). `∞` combines only the doubtful answers.
     pub junction_gate: f64,
-    /// A board-wide answer whose σ exceeds this multiple of the board's median σ is doubtful:
-    /// the corner goes to the local refiner, and to the junction model (failing that, the
-    /// gradient estimate) unless the local refiner converges with both edges seen on both
+    /// A board-wide answer whose σ exceeds this multiple of the board's median σ (at most 0.1 px)
+    /// is doubtful: the corner goes to the local refiner, and to the junction model (failing that,
+    /// the gradient estimate) unless the local refiner converges with both edges seen on both
     /// sides. A converged local answer is kept unless the doubtful board-wide answer claims a
     /// smaller σ. The junction model's answer replaces the doubtful board-wide one; a gradient
-    /// estimate that agrees with the board-wide answer within its σ is averaged with it, one
-    /// that does not replaces it; without a board-wide answer, a one-sided local answer and the
-    /// junction model's (or the gradient estimate's) answer compete by σ. It happens at the ends of grid lines next to a silhouette, where
-    /// the squares are foreshortened to a few pixels and the curves are extrapolated. The limit
-    /// is relative so that it holds at any image scale, blur and noise. `∞` keeps every
-    /// board-wide answer.
+    /// estimate that agrees with the board-wide answer within its σ is averaged with it, one that
+    /// does not replaces it; without a board-wide answer, a one-sided local answer and the junction
+    /// model's (or the gradient estimate's) answer compete by σ. It happens at the ends of grid
+    /// lines next to a silhouette, where the squares are foreshortened to a few pixels and the
+    /// curves are extrapolated. The limit is relative so that it holds at any image scale, blur and
+    /// noise. `∞` keeps every board-wide answer.
     pub max_board_sigma: f64,
     /// Keep the corners that no refiner could place (status `Failed`, at their pixel-level
     /// position). By default they are dropped: on about 900 rendered scenes (occluders, dot
@@ -233,6 +233,14 @@ pub struct Detection {
     pub timing: Timing,
 }
 
+/// Ceiling (px) on the board's typical σ in [`DetectParams::junction_gate`] and
+/// [`DetectParams::max_board_sigma`]. Where most of a board's curves are themselves poor (squares
+/// of 6–10 px, whose lines' pieces are a square or two long), the median σ of its board-wide
+/// answers reached hundreds of pixels, and gates relative to it accepted answers 1 px off
+/// without a junction fit. The median is 0.004–0.065 px on the photos and in every cell of the
+/// robustness report, so the ceiling leaves them alone.
+const TYPICAL_SIGMA_CEILING: f64 = 0.1;
+
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
@@ -301,7 +309,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             if s.is_empty() {
                 f64::INFINITY
             } else {
-                median_mad_in_place(&mut s).0
+                median_mad_in_place(&mut s).0.min(TYPICAL_SIGMA_CEILING)
             }
         });
         let sigma_limit = params.max_board_sigma * typical_sigma;

@@ -11,7 +11,7 @@ use conic_corners::detect::{detect, DetectParams, Detection};
 use conic_corners::prefilter::box_downsample;
 use conic_corners::refine::Status;
 use conic_corners::synth::board::{
-    random_board_scene, BoardCorner, BoardScene, Dots, Occluder, Surface,
+    random_board_scene, BoardCorner, BoardScene, Dots, Occluder, PinholeCamera, Surface,
 };
 use conic_corners::GrayImage;
 use rand::SeedableRng;
@@ -550,6 +550,51 @@ fn a_board_whose_junctions_are_all_bridged_is_found() {
     assert_eq!(det.boards.len(), 1);
     assert!(o.missing <= 1, "{}", o.missing);
     assert!(o.rms < RMS_BOUND, "{}", o.rms);
+}
+
+#[test]
+fn tiny_squares_whose_board_fit_is_poor_get_junction_answers() {
+    // A 7 × 9 board at 640 × 480 with squares of 7–13 px: most of its lines' pieces are a square
+    // or two long, and the median σ of the board-wide answers was 730 px. Gates relative to it
+    // kept board answers 1.1–1.4 px off (σ 0.6 px) without a junction fit, and others with
+    // σ of hundreds of pixels.
+    let vga = PinholeCamera {
+        width: 640,
+        height: 480,
+        fx: 600.0,
+        fy: 600.0,
+        cx: 319.5,
+        cy: 239.5,
+        k1: 0.0,
+        k2: 0.0,
+    };
+    let mut s = scene(Surface::Flat, 704, |t| {
+        (t.rows, t.cols, t.camera, t.blur) = (7, 9, vga, 0.8)
+    });
+    s.pose.translation.vector *= 2.5;
+    let r = s.render(4).expect("valid scene");
+    let det = detect(&r.image, &DetectParams::default());
+    let o = check("tiny squares", &det, &r.corners);
+    assert_eq!((det.boards.len(), o.missing), (1, 0));
+    for c in &det.boards[0].corners {
+        let d = r
+            .corners
+            .iter()
+            .map(|t| (t.x - c.x).hypot(t.y - c.y))
+            .fold(f64::INFINITY, f64::min);
+        let sigma = c.sigma.expect("refined");
+        eprintln!(
+            "({}, {}) {:?} {d:.3} px off, σ {sigma:.3}",
+            c.row, c.col, c.path
+        );
+        assert!(
+            d < 0.5 && sigma < 1.0,
+            "({}, {}) {d} px off, σ {sigma}",
+            c.row,
+            c.col
+        );
+    }
+    assert!(o.rms < 0.06, "{}", o.rms);
 }
 
 #[test]
