@@ -692,7 +692,7 @@ fn bar_pose(what: &str, surface: Surface, seed: u64) {
 #[ignore]
 fn robustness_report() {
     type Edit = fn(&mut BoardScene);
-    let conditions: [(&str, Edit); 15] = [
+    let conditions: [(&str, Edit); 16] = [
         ("baseline", |_| ()),
         ("dot gain 0.1 mm", |t| t.dot_gain_mm = 0.1),
         ("dot gain 0.2 mm", |t| t.dot_gain_mm = 0.2),
@@ -711,6 +711,19 @@ fn robustness_report() {
             (t.rows, t.cols, t.square_mm) = (15, 21, 8.0)
         }),
         ("radial distortion k₁ −0.25", |t| t.camera.k1 = -0.25),
+        ("640×480, 15×21 corners, 8 mm", |t| {
+            (t.rows, t.cols, t.square_mm) = (15, 21, 8.0);
+            t.camera = PinholeCamera {
+                width: 640,
+                height: 480,
+                fx: 600.0,
+                fy: 600.0,
+                cx: 319.5,
+                cy: 239.5,
+                k1: 0.0,
+                k2: 0.0,
+            };
+        }),
         ("bar across the board", |t| t.occluders = vec![report_bar()]),
     ];
     let surfaces = [
