@@ -52,7 +52,11 @@
 //!    window, the plain model (no sliver edge) fitted within twice its window may confirm too,
 //!    if its edges bend by at most `|κ| r ≤ 0.5` across it.
 //!    A site whose full frame leaves the image (a board cut by the image's border) is retried
-//!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way.
+//!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way. Nearer the
+//!    border than that (on large squares a quarter frame spans 20 px and more), a corner that
+//!    the election found within `agreement` steps of `p̂`, with its edges within 15° of the
+//!    grid steps and on no board (its grid cells leave the image, so it has no links), stands
+//!    in for the verification, and is refined and confirmed the same way.
 //!    An X-junction is `m + k·sign(a)·sign(b)`; its *phase* (the sign of
 //!    `k`) times `(−1)^(r+c)` is the same all over a board, and is taken from the board's own
 //!    corners by majority. A quick test on 5 samples per quadrant within 0.26 step (the quadrant
@@ -91,7 +95,7 @@ use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::refine::{refine_one, RefineParams, Status};
 use crate::GrayImage;
 use rayon::prelude::*;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::OnceLock;
 
 /// Tuning of [`complete_boards`]; lengths in grid steps (the local square side).
@@ -608,6 +612,29 @@ const SLIVER_REFINE_STEP: f64 = 0.05;
 /// The scales of a sliver's side of the frame tried at a boundary site.
 const SLIVER_SCALES: [f64; 2] = [0.5, 0.25];
 
+/// The corner of `free` nearest `p` within `radius` whose two edge orientations lie within
+/// [`ELECTED_ANGLE_TOLERANCE`] of the grid steps `u` and `v`, one each: its position and score.
+fn elected_at(free: &[Corner], p: P, (u, v): (P, P), radius: f64) -> Option<(P, f64)> {
+    let line = |d: P| d[1].atan2(d[0]);
+    let apart = |a: f64, b: f64| {
+        let d = (a - b).rem_euclid(std::f64::consts::PI);
+        d.min(std::f64::consts::PI - d)
+    };
+    let along = |c: &Corner, k: usize| {
+        apart(c.angles[k], line(u)) <= ELECTED_ANGLE_TOLERANCE
+            && apart(c.angles[1 - k], line(v)) <= ELECTED_ANGLE_TOLERANCE
+    };
+    free.iter()
+        .map(|c| (c, norm(sub([c.x, c.y], p))))
+        .filter(|&(c, d)| d <= radius && (along(c, 0) || along(c, 1)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(c, _)| ([c.x, c.y], c.score))
+}
+
+/// Largest angle between an elected corner's edge and the grid step it must follow in
+/// [`elected_at`]: the connectivity's default `θ_edge`.
+const ELECTED_ANGLE_TOLERANCE: f64 = 15.0 * std::f64::consts::PI / 180.0;
+
 /// Searches the best junction near `p` (coarse to fine, from the one of `starts` with the highest
 /// quick-test contrast, or of its 8 neighbours `refine_step` away if one is higher; 0: none) and
 /// applies checks (a), (b). The search moves by the grid steps `(u, v)`; `starts` are offsets in
@@ -739,6 +766,15 @@ fn complete_one(
                 }
             }
         }
+        // The elected corners that no board holds.
+        let taken: HashSet<usize> = boards
+            .iter()
+            .flat_map(|bd| bd.corners.iter().copied())
+            .collect();
+        let free: Vec<Corner> = (0..corners.len())
+            .filter(|i| !taken.contains(i))
+            .map(|i| corners[i])
+            .collect();
         // The verification (step 3 of the module docs) of each site, in parallel: it reads the
         // image and the grid as it stood at the start of the round, never another site's answer.
         let checked: Vec<Option<(Label, Corner, f64)>> = sites
@@ -789,6 +825,16 @@ fn complete_one(
                                 )
                             })
                         })?
+                        .map(|(q, score)| (q, score, true))
+                })
+                .or_else(|| {
+                    // Nearer the border than even the narrowed frames reach (on large squares a
+                    // quarter frame spans 20 px and more): the election's test, on its 15-px
+                    // patch, verified an X-junction there if it elected a corner at the
+                    // prediction with its edges along the grid. No board took that corner, as
+                    // its grid cells leave the image.
+                    (junction(image, p, &Frame::symmetric(u, v)).is_none())
+                        .then(|| elected_at(&free, p, (u, v), params.agreement * step))?
                         .map(|(q, score)| (q, score, true))
                 })
                 .or_else(|| {

@@ -433,6 +433,29 @@ fn corners_near_the_image_border_are_completed() {
 }
 
 #[test]
+fn corners_a_few_pixels_inside_the_image_border_are_completed_from_the_election() {
+    // Squares of about 250 px cut by the image's border: corners 10–15 px inside it, which the
+    // election finds, belong to no complete grid cell and get no links, and the completion's
+    // frames, narrowed to a quarter step, still leave the image there.
+    for (seed, near) in [
+        (1u64, [31.0, 10.0]),
+        (2, [1909.0, 1104.0]),
+        (3, [15.0, 1020.0]),
+    ] {
+        let mut s = scene(Surface::Flat, 700 + seed, |_| ());
+        s.pose.translation.vector /= 2.2;
+        let (o, det) = run(&format!("cut by the border, seed {seed}"), &s, seed);
+        assert_eq!((det.boards.len(), o.missing), (1, 0), "seed {seed}");
+        assert!(o.rms < RMS_BOUND, "{}", o.rms);
+        let d = detected(&det)
+            .iter()
+            .map(|&(_, x, y, _, _)| (x - near[0]).hypot(y - near[1]))
+            .fold(f64::INFINITY, f64::min);
+        assert!(d < 1.5, "seed {seed}: nothing near {near:?}");
+    }
+}
+
+#[test]
 fn one_sided_answers_at_bridged_junctions_restart_where_the_curves_meet() {
     // Under a 0.2 mm dot gain the pixel-level maximum of one corner sits at a tip of its bridged
     // junction, 2 px from where the board's curves meet (beyond the board fit's `max_shift`),
