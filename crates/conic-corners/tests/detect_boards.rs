@@ -129,6 +129,20 @@ fn run(what: &str, scene: &BoardScene, seed: u64) -> (Outcome, Detection) {
     (check(what, &det, &r.corners), det)
 }
 
+/// A 640 × 480 camera (focal length 600 px, no distortion): low-resolution views.
+fn vga() -> PinholeCamera {
+    PinholeCamera {
+        width: 640,
+        height: 480,
+        fx: 600.0,
+        fy: 600.0,
+        cx: 319.5,
+        cy: 239.5,
+        k1: 0.0,
+        k2: 0.0,
+    }
+}
+
 fn scene(surface: Surface, seed: u64, edit: impl FnOnce(&mut BoardScene)) -> BoardScene {
     let mut t = template();
     edit(&mut t);
@@ -441,16 +455,7 @@ fn no_gradient_estimate_between_two_sliver_junctions() {
     for seed in 0..6u64 {
         let s = scene(Surface::Cylinder { radius_mm: 60.0 }, 100 + seed, |t| {
             (t.rows, t.cols, t.square_mm) = (15, 21, 8.0);
-            t.camera = PinholeCamera {
-                width: 640,
-                height: 480,
-                fx: 600.0,
-                fy: 600.0,
-                cx: 319.5,
-                cy: 239.5,
-                k1: 0.0,
-                k2: 0.0,
-            };
+            t.camera = vga();
         });
         let (_, det) = run(&format!("640 × 480 cylinder, seed {seed}"), &s, seed);
         assert_eq!(det.boards.len(), 1, "seed {seed}");
@@ -606,18 +611,8 @@ fn tiny_squares_whose_board_fit_is_poor_get_junction_answers() {
     // or two long, and the median σ of the board-wide answers was 730 px. Gates relative to it
     // kept board answers 1.1–1.4 px off (σ 0.6 px) without a junction fit, and others with
     // σ of hundreds of pixels.
-    let vga = PinholeCamera {
-        width: 640,
-        height: 480,
-        fx: 600.0,
-        fy: 600.0,
-        cx: 319.5,
-        cy: 239.5,
-        k1: 0.0,
-        k2: 0.0,
-    };
     let mut s = scene(Surface::Flat, 704, |t| {
-        (t.rows, t.cols, t.camera, t.blur) = (7, 9, vga, 0.8)
+        (t.rows, t.cols, t.camera, t.blur) = (7, 9, vga(), 0.8)
     });
     s.pose.translation.vector *= 2.5;
     let r = s.render(4).expect("valid scene");
@@ -761,16 +756,7 @@ fn robustness_report() {
         ("radial distortion k₁ −0.25", |t| t.camera.k1 = -0.25),
         ("640×480, 15×21 corners, 8 mm", |t| {
             (t.rows, t.cols, t.square_mm) = (15, 21, 8.0);
-            t.camera = PinholeCamera {
-                width: 640,
-                height: 480,
-                fx: 600.0,
-                fy: 600.0,
-                cx: 319.5,
-                cy: 239.5,
-                k1: 0.0,
-                k2: 0.0,
-            };
+            t.camera = vga();
         }),
         ("bar across the board", |t| t.occluders = vec![report_bar()]),
     ];
