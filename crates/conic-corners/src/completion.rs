@@ -88,7 +88,7 @@
 //! region beyond one ring is reached only over several rounds; a junction whose quadrant is
 //! covered by an occluder of the same grey as that quadrant passes (a) but usually not (b).
 
-use crate::connectivity::Board;
+use crate::connectivity::{line_diff, Board, ConnectivityParams};
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
@@ -612,17 +612,15 @@ const SLIVER_REFINE_STEP: f64 = 0.05;
 /// The scales of a sliver's side of the frame tried at a boundary site.
 const SLIVER_SCALES: [f64; 2] = [0.5, 0.25];
 
-/// The corner of `free` nearest `p` within `radius` whose two edge orientations lie within
-/// [`ELECTED_ANGLE_TOLERANCE`] of the grid steps `u` and `v`, one each: its position and score.
+/// The corner of `free` nearest `p` within `radius` whose two edge orientations lie within the
+/// connectivity's default `θ_edge` of the grid steps `u` and `v`, one each: its position and
+/// score.
 fn elected_at(free: &[Corner], p: P, (u, v): (P, P), radius: f64) -> Option<(P, f64)> {
+    let tolerance = ConnectivityParams::default().theta_edge;
     let line = |d: P| d[1].atan2(d[0]);
-    let apart = |a: f64, b: f64| {
-        let d = (a - b).rem_euclid(std::f64::consts::PI);
-        d.min(std::f64::consts::PI - d)
-    };
     let along = |c: &Corner, k: usize| {
-        apart(c.angles[k], line(u)) <= ELECTED_ANGLE_TOLERANCE
-            && apart(c.angles[1 - k], line(v)) <= ELECTED_ANGLE_TOLERANCE
+        line_diff(c.angles[k], line(u)) <= tolerance
+            && line_diff(c.angles[1 - k], line(v)) <= tolerance
     };
     free.iter()
         .map(|c| (c, norm(sub([c.x, c.y], p))))
@@ -630,10 +628,6 @@ fn elected_at(free: &[Corner], p: P, (u, v): (P, P), radius: f64) -> Option<(P, 
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(c, _)| ([c.x, c.y], c.score))
 }
-
-/// Largest angle between an elected corner's edge and the grid step it must follow in
-/// [`elected_at`]: the connectivity's default `θ_edge`.
-const ELECTED_ANGLE_TOLERANCE: f64 = 15.0 * std::f64::consts::PI / 180.0;
 
 /// Searches the best junction near `p` (coarse to fine, from the one of `starts` with the highest
 /// quick-test contrast, or of its 8 neighbours `refine_step` away if one is higher; 0: none) and

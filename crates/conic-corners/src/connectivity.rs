@@ -153,7 +153,7 @@ impl HasPosition for Site {
 }
 
 /// Difference between two line orientations modulo π, in `[0, π/2]`.
-fn line_diff(a: f64, b: f64) -> f64 {
+pub(crate) fn line_diff(a: f64, b: f64) -> f64 {
     let d = (a - b).rem_euclid(std::f64::consts::PI);
     d.min(std::f64::consts::PI - d)
 }
