@@ -61,6 +61,10 @@ struct Args {
     /// Probability that a view gets an occluder bar across the board.
     #[arg(long, default_value_t = 0.0)]
     occluded_share: f64,
+    /// Factor on every view's noise σ, drawn as usual (the same scenes and seeds): 0 renders
+    /// noise-free views, which separates a method's bias from its noise.
+    #[arg(long, default_value_t = 1.0)]
+    noise_scale: f64,
 }
 
 /// Inner corners per column and per row of every board.
@@ -316,7 +320,8 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
     let (template, pose, scenes) = draw_pair(args.seed, args.occluded_share, i)?;
     let mut views = serde_json::Map::new();
     let mut ours = Vec::new();
-    for ((scene, noise_seed), side) in scenes.into_iter().zip(["L", "R"]) {
+    for ((mut scene, noise_seed), side) in scenes.into_iter().zip(["L", "R"]) {
+        scene.noise *= args.noise_scale;
         let rendered = scene.render(noise_seed).map_err(|e| e.to_string())?;
         let rel = format!("images/{i:04}_{side}.png");
         let path = args.out.join(&rel);
@@ -407,6 +412,9 @@ fn main() -> Result<(), String> {
     let args = Args::parse();
     if !(0.0..=1.0).contains(&args.occluded_share) {
         return Err("--occluded-share must be in 0..=1".into());
+    }
+    if !(args.noise_scale.is_finite() && args.noise_scale >= 0.0) {
+        return Err("--noise-scale must be finite and at least 0".into());
     }
     std::fs::create_dir_all(args.out.join("images")).map_err(|e| e.to_string())?;
     let t0 = Instant::now();
