@@ -42,7 +42,9 @@ pub struct DetectParams {
     /// Board-wide fitting (III-D to III-F along whole grid lines), for [`RefineMode::Board`].
     pub board_fit: BoardFitParams,
     /// The last-resort refiner ([`crate::gradient`]): it places the corners that the local
-    /// refiner fails on. `None` disables it, and those corners keep their pixel-level position.
+    /// refiner fails on, where no labelled neighbour is nearer than four window radii (the
+    /// window must hold that junction alone). `None` disables it, and those corners keep their
+    /// pixel-level position.
     pub gradient: Option<GradientParams>,
     /// The junction-model refiner ([`crate::junction`]): it places the corners whose edge walks
     /// are one-sided or failed, before the gradient estimate is tried, and it is combined by
