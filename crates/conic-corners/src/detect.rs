@@ -71,7 +71,8 @@ pub struct DetectParams {
     /// model's (or the gradient estimate's) answer compete by σ. It happens at the ends of grid
     /// lines next to a silhouette, where the squares are foreshortened to a few pixels and the
     /// curves are extrapolated. The limit is relative so that it holds at any image scale, blur and
-    /// noise. `∞` keeps every board-wide answer.
+    /// noise. `∞` keeps every board-wide answer. A doubtful board-wide answer that stands (nothing
+    /// better places the corner) is reported with status `Fallback`.
     pub max_board_sigma: f64,
     /// Keep the corners that no refiner could place (status `Failed`, at their pixel-level
     /// position). By default they are dropped: on about 900 rendered scenes (occluders, dot
@@ -179,8 +180,9 @@ pub struct DetectedCorner {
     pub score: f64,
     /// How the subpixel position was obtained: `Converged` for board-wide answers and the local
     /// refiner's full answers, `Fallback` for its answers with less support, for the junction
-    /// model and the gradient estimate, and for a board-wide answer taken although it lies
-    /// farther than the board fit's
+    /// model and the gradient estimate, for a board-wide answer whose σ is above its board's
+    /// limit ([`DetectParams::max_board_sigma`]) kept for want of a better one, and for a
+    /// board-wide answer taken although it lies farther than the board fit's
     /// `max_shift` from the pixel-level position (only where no refiner could place the corner);
     /// `Failed` keeps the pixel-level position (only with [`DetectParams::keep_unrefined`]).
     pub status: Status,
@@ -513,6 +515,19 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     }
                     (gc, _) => gc.unwrap_or(last),
                 }))
+            })
+            // A board-wide answer above the board's σ limit that stands for want of a better
+            // one (short, extrapolated curves) has less support than its path claims.
+            .map(|c| {
+                let doubtful = sigma_of(&c) > sigma_limit;
+                if c.path == Path::Board && c.status == Status::Converged && doubtful {
+                    DetectedCorner {
+                        status: Status::Fallback,
+                        ..c
+                    }
+                } else {
+                    c
+                }
             })
             .collect();
         refine_ms += ms(t);

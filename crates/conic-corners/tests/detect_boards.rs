@@ -752,7 +752,7 @@ fn bar_pose(what: &str, surface: Surface, seed: u64) {
 #[ignore]
 fn robustness_report() {
     type Edit = fn(&mut BoardScene);
-    let conditions: [(&str, Edit); 16] = [
+    let conditions: [(&str, Edit); 17] = [
         ("baseline", |_| ()),
         ("dot gain 0.1 mm", |t| t.dot_gain_mm = 0.1),
         ("dot gain 0.2 mm", |t| t.dot_gain_mm = 0.2),
@@ -769,6 +769,9 @@ fn robustness_report() {
         ("squares 3.5 mm", |t| (t.square_mm, t.cols) = (3.5, 11)),
         ("15×21 corners, 8 mm", |t| {
             (t.rows, t.cols, t.square_mm) = (15, 21, 8.0)
+        }),
+        ("19×29 corners, 6 mm", |t| {
+            (t.rows, t.cols, t.square_mm) = (19, 29, 6.0)
         }),
         ("radial distortion k₁ −0.25", |t| t.camera.k1 = -0.25),
         ("640×480, 15×21 corners, 8 mm", |t| {
