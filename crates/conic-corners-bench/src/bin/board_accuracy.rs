@@ -408,14 +408,20 @@ fn detect_view(path: &Path, rel: &str) -> Result<Vec<Value>, String> {
     Ok(out)
 }
 
-fn main() -> Result<(), String> {
-    let args = Args::parse();
+/// Checks the options that clap cannot; the message names the offending one.
+fn validate(args: &Args) -> Result<(), String> {
     if !(0.0..=1.0).contains(&args.occluded_share) {
         return Err("--occluded-share must be in 0..=1".into());
     }
     if !(args.noise_scale.is_finite() && args.noise_scale >= 0.0) {
         return Err("--noise-scale must be finite and at least 0".into());
     }
+    Ok(())
+}
+
+fn main() -> Result<(), String> {
+    let args = Args::parse();
+    validate(&args)?;
     std::fs::create_dir_all(args.out.join("images")).map_err(|e| e.to_string())?;
     let t0 = Instant::now();
     let results: Vec<(Value, Vec<Value>)> = (0..args.pairs)
@@ -451,6 +457,25 @@ mod tests {
         let r2 = xn * xn + yn * yn;
         let d = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2;
         [cam.fx * xn * d + cam.cx, cam.fy * yn * d + cam.cy]
+    }
+
+    #[test]
+    fn bad_options_are_refused_by_name() {
+        let args = |extra: &[&str]| {
+            Args::try_parse_from(["board-accuracy", "--out", "x"].iter().chain(extra)).unwrap()
+        };
+        assert!(validate(&args(&[])).is_ok());
+        assert!(validate(&args(&["--noise-scale=0"])).is_ok());
+        for (flag, value) in [
+            ("--occluded-share", "1.5"),
+            ("--occluded-share", "NaN"),
+            ("--noise-scale", "-1"),
+            ("--noise-scale", "inf"),
+            ("--noise-scale", "NaN"),
+        ] {
+            let err = validate(&args(&[&format!("{flag}={value}")])).unwrap_err();
+            assert!(err.starts_with(flag), "{flag} {value}: {err}");
+        }
     }
 
     #[test]
