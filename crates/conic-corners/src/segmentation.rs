@@ -124,7 +124,7 @@ pub(crate) fn median_mad_in_place(v: &mut [f64]) -> (f64, f64) {
 }
 
 /// Median of non-empty `v` (the mean of the two middle values for an even count); reorders `v`.
-fn median_in_place(v: &mut [f64]) -> f64 {
+pub(crate) fn median_in_place(v: &mut [f64]) -> f64 {
     let (mid, odd) = (v.len() / 2, v.len() % 2 == 1);
     let (below, upper, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
     let upper = *upper;

@@ -487,6 +487,35 @@ fn no_gradient_estimate_beside_the_slivers_beyond_a_board() {
 }
 
 #[test]
+fn a_board_seen_nearly_edge_on_gives_no_sheared_lattice() {
+    // Boards turned nearly edge-on, their squares foreshortened to 4–5 px (15 × 21 corners of
+    // 8 mm at 640 × 480) or to rhombi whose edges meet at 20° (tilted 35° further). There the
+    // election's edge angles fail, and the connectivity linked corners two rows apart: sheared
+    // lattices whose phase is consistent, with 4 and 26 corners mislabelled. In the frame of
+    // their labelled neighbours their corners correlate with the ideal junction by 0.6–0.7.
+    let edge_on = scene(Surface::Flat, 906, |t| {
+        (t.rows, t.cols, t.square_mm, t.camera) = (15, 21, 8.0, vga());
+    });
+    let mut tilted = scene(Surface::Flat, 908, |_| ());
+    tilted.pose *= nalgebra::Isometry3::rotation(nalgebra::Vector3::x() * 35f64.to_radians());
+    // `check` refuses wrong labels and false corners. The edge-on board gives no board at all
+    // (as OpenCV's detectors); the tilted one loses the far corners, in their rhombi.
+    let r = edge_on.render(6).expect("valid scene");
+    check(
+        "edge-on",
+        &detect(&r.image, &DetectParams::default()),
+        &r.corners,
+    );
+    let r = tilted.render(8).expect("valid scene");
+    let o = check(
+        "tilted",
+        &detect(&r.image, &DetectParams::default()),
+        &r.corners,
+    );
+    assert!(o.missing <= 12, "{} missing", o.missing);
+}
+
+#[test]
 fn corners_a_few_pixels_inside_the_image_border_are_completed_from_the_election() {
     // Squares of about 250 px cut by the image's border: corners 10–15 px inside it, which the
     // election finds, belong to no complete grid cell and get no links, and the completion's
