@@ -18,8 +18,12 @@
 //!    `max_orientation_change` (grid orientations vary smoothly, so a corner whose second edge
 //!    disagrees is not the same grid).
 //! 3. **Nearest per ray, mutual.** Each ray keeps its nearest admissible candidate (so at most one
-//!    neighbour per side, at most two per family); the link `i — j` is kept only if `j` also chose
-//!    `i` on one of its rays.
+//!    neighbour per side, at most two per family), unless that one lies more than `theta_edge / 2`
+//!    off the ray and another admissible candidate at most [`ALIGNED_REACH`] times farther lies
+//!    less than half as far off it (sines of the angles): in a cell foreshortened to a quarter of
+//!    its length the short diagonal is both nearer than the grid neighbour and within
+//!    `theta_edge` of the long side. The link `i — j` is kept only if `j` also chose `i` on one of
+//!    its rays.
 //! 4. **Pruning, repeated until nothing changes.** (a) *Quad support*: a link survives only if it is
 //!    a side of at least one grid cell, a 4-cycle `i — j — l — k — i` whose sides `i — j` and
 //!    `i — k` leave `i` along different families, and which is nearly a parallelogram
@@ -181,6 +185,12 @@ fn usable(c: &Corner, theta_edge: f64) -> bool {
         && line_diff(c.angles[0], c.angles[1]) > 2.0 * theta_edge
 }
 
+/// How much farther than the nearest admissible candidate on a ray a far better aligned one may
+/// lie and still be chosen ([`connect`], step 3). A diagonal was 1.15 times nearer than the grid
+/// neighbour (cells of 90 × 25 px); at an S's fold, where the chord of a row bends 10° off the
+/// ray, the next corner but one lies straighter on and 1.5 times farther.
+const ALIGNED_REACH: f64 = 1.3;
+
 /// Links every corner to its grid neighbours (paper III-C, extended; the exact rule is in the
 /// [module docs](self)). Positions in image coordinates; the result is indexed like `corners`.
 /// Never panics: unusable corners (non-finite, degenerate orientations) and coincident duplicates
@@ -239,6 +249,9 @@ pub fn connect(corners: &[Corner], params: &ConnectivityParams) -> Graph {
     let dot = |a: (f64, f64), b: (f64, f64)| a.0 * b.0 + a.1 * b.1;
     let mut pick: Vec<[Option<(usize, f64)>; 4]> = vec![[None; 4]; n];
     let mut cand: Vec<usize> = Vec::new();
+    // Admissible candidates of the current corner: (slot, candidate, length, sine of the angle
+    // to the ray).
+    let mut admissible: Vec<(usize, usize, f64, f64)> = Vec::new();
     for i in 0..n {
         let ci = &corners[i];
         if nbrs(i).is_empty() {
@@ -251,6 +264,7 @@ pub fn connect(corners: &[Corner], params: &ConnectivityParams) -> Graph {
         }
         cand.sort_unstable();
         cand.dedup();
+        admissible.clear();
         for &j in &cand {
             let cj = &corners[j];
             let d = (cj.x - ci.x, cj.y - ci.y);
@@ -271,10 +285,26 @@ pub fn connect(corners: &[Corner], params: &ConnectivityParams) -> Graph {
                     continue;
                 }
                 let slot = 2 * f + usize::from(along < 0.0);
-                if pick[i][slot].map_or(true, |(_, best)| len < best) {
-                    pick[i][slot] = Some((j, len));
-                }
+                let sine = (1.0 - (along / len).powi(2)).max(0.0).sqrt();
+                admissible.push((slot, j, len, sine));
             }
+        }
+        for (slot, chosen) in pick[i].iter_mut().enumerate() {
+            let on_ray = || admissible.iter().filter(|a| a.0 == slot);
+            let Some(&(_, j, len, sine)) = on_ray().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+                continue;
+            };
+            // In a cell foreshortened to a quarter of its length, the short diagonal lies 14°
+            // from the long side, inside the cone and nearer than the grid neighbour, which
+            // then lies on the same ray, far better aligned and not much farther.
+            let aligned = (sine > (0.5 * theta).sin())
+                .then(|| {
+                    on_ray()
+                        .filter(|a| a.2 <= ALIGNED_REACH * len && a.3 < 0.5 * sine)
+                        .min_by(|a, b| a.3.total_cmp(&b.3))
+                })
+                .flatten();
+            *chosen = Some(aligned.map_or((j, len), |a| (a.1, a.2)));
         }
     }
     for i in 0..n {

@@ -1016,6 +1016,22 @@ fn diagonal_motion_blur(img: &GrayImage, half: isize, step: f64) -> GrayImage {
     GrayImage::from_vec(w, h, data).unwrap()
 }
 
+#[test]
+fn a_cell_foreshortened_to_a_quarter_links_no_diagonal() {
+    // Tilted 50° further, the far squares are 90 × 25 px: a cell's short diagonal lies 14° from
+    // the long side, within the connectivity's cone and 1.15 times nearer than the grid
+    // neighbour, and one corner was labelled two rows off.
+    let mut s = scene(Surface::Flat, 911, |_| ());
+    s.pose *= nalgebra::Isometry3::rotation(nalgebra::Vector3::x() * (-50f64).to_radians());
+    let r = s.render(11).expect("valid scene");
+    let o = check(
+        "tilted 50°",
+        &detect(&r.image, &DetectParams::default()),
+        &r.corners,
+    );
+    assert!(o.missing <= 2, "{} missing", o.missing);
+}
+
 /// A render blurred along the image diagonal (9 samples over 8 px): the board's perspective turns its corners'
 /// edges, and on one side of it the blur runs inside a quadrant, whose colour then fills the
 /// junction's centre. The fine election rejected those 29 of 81 corners (a fifth of the
