@@ -143,6 +143,12 @@ fn vga() -> PinholeCamera {
     }
 }
 
+/// A rotation by `degrees` about the board's x axis (its rows' direction): the board seen more
+/// obliquely, to add to a random pose.
+fn tilt(degrees: f64) -> nalgebra::Isometry3<f64> {
+    nalgebra::Isometry3::rotation(nalgebra::Vector3::x() * degrees.to_radians())
+}
+
 fn scene(surface: Surface, seed: u64, edit: impl FnOnce(&mut BoardScene)) -> BoardScene {
     let mut t = template();
     edit(&mut t);
@@ -497,7 +503,7 @@ fn a_board_seen_nearly_edge_on_gives_no_sheared_lattice() {
         (t.rows, t.cols, t.square_mm, t.camera) = (15, 21, 8.0, vga());
     });
     let mut tilted = scene(Surface::Flat, 908, |_| ());
-    tilted.pose *= nalgebra::Isometry3::rotation(nalgebra::Vector3::x() * 35f64.to_radians());
+    tilted.pose *= tilt(35.0);
     // `check` refuses wrong labels and false corners. The edge-on board gives no board at all
     // (as OpenCV's detectors); the tilted one loses the far corners, in their rhombi.
     let r = edge_on.render(6).expect("valid scene");
@@ -816,6 +822,25 @@ fn robustness_report() {
         }),
         ("bar across the board", |t| t.occluders = vec![report_bar()]),
     ];
+    // Conditions that change the random pose or the rendered image.
+    type Posed = fn(&mut BoardScene);
+    type Degraded = fn(GrayImage) -> GrayImage;
+    let after: [(&str, Posed, Degraded); 2] = [
+        ("tilted 35° further", |s| s.pose *= tilt(35.0), |i| i),
+        (
+            "diagonal motion blur 8 px",
+            |_| (),
+            |i| diagonal_motion_blur(&i, 4, std::f64::consts::FRAC_1_SQRT_2),
+        ),
+    ];
+    let all = conditions
+        .into_iter()
+        .map(|(n, e)| (n, e, (|_| ()) as Posed, (|i| i) as Degraded))
+        .chain(
+            after
+                .into_iter()
+                .map(|(n, p, d)| (n, (|_| ()) as Edit, p, d)),
+        );
     let surfaces = [
         ("flat", Surface::Flat),
         ("cylinder 60", Surface::Cylinder { radius_mm: 60.0 }),
@@ -823,15 +848,17 @@ fn robustness_report() {
     ];
     println!("| condition | surface | visible | found | off | no board | RMS px |");
     println!("|---|---|---|---|---|---|---|");
-    for (condition, edit) in conditions {
+    for (condition, edit, pose, degrade) in all {
         for (name, surface) in surfaces {
             let (mut visible, mut found, mut off, mut none, mut sq) = (0, 0, 0, 0, 0.0);
             for seed in 0..6u64 {
                 let mut t = template();
                 edit(&mut t);
-                let s = random_board_scene(&mut ChaCha8Rng::seed_from_u64(100 + seed), surface, &t);
+                let mut s =
+                    random_board_scene(&mut ChaCha8Rng::seed_from_u64(100 + seed), surface, &t);
+                pose(&mut s);
                 let r = s.render(seed).expect("valid scene");
-                let det = detect(&r.image, &DetectParams::default());
+                let det = detect(&degrade(r.image.clone()), &DetectParams::default());
                 none += usize::from(det.boards.is_empty());
                 let nearest = |x: f64, y: f64, visible_only: bool| {
                     r.corners
@@ -1022,7 +1049,7 @@ fn a_cell_foreshortened_to_a_quarter_links_no_diagonal() {
     // the long side, within the connectivity's cone and 1.15 times nearer than the grid
     // neighbour, and one corner was labelled two rows off.
     let mut s = scene(Surface::Flat, 911, |_| ());
-    s.pose *= nalgebra::Isometry3::rotation(nalgebra::Vector3::x() * (-50f64).to_radians());
+    s.pose *= tilt(-50.0);
     let r = s.render(11).expect("valid scene");
     let o = check(
         "tilted 50°",
