@@ -506,18 +506,8 @@ fn a_board_seen_nearly_edge_on_gives_no_sheared_lattice() {
     tilted.pose *= tilt(35.0);
     // `check` refuses wrong labels and false corners. The edge-on board gives no board at all
     // (as OpenCV's detectors); the tilted one loses the far corners, in their rhombi.
-    let r = edge_on.render(6).expect("valid scene");
-    check(
-        "edge-on",
-        &detect(&r.image, &DetectParams::default()),
-        &r.corners,
-    );
-    let r = tilted.render(8).expect("valid scene");
-    let o = check(
-        "tilted",
-        &detect(&r.image, &DetectParams::default()),
-        &r.corners,
-    );
+    run("edge-on", &edge_on, 6);
+    let (o, _) = run("tilted", &tilted, 8);
     assert!(o.missing <= 12, "{} missing", o.missing);
 }
 
@@ -1050,19 +1040,15 @@ fn a_cell_foreshortened_to_a_quarter_links_no_diagonal() {
     // neighbour, and one corner was labelled two rows off.
     let mut s = scene(Surface::Flat, 911, |_| ());
     s.pose *= tilt(-50.0);
-    let r = s.render(11).expect("valid scene");
-    let o = check(
-        "tilted 50°",
-        &detect(&r.image, &DetectParams::default()),
-        &r.corners,
-    );
+    let (o, _) = run("tilted 50°", &s, 11);
     assert!(o.missing <= 2, "{} missing", o.missing);
 }
 
-/// A render blurred along the image diagonal (9 samples over 8 px): the board's perspective turns its corners'
-/// edges, and on one side of it the blur runs inside a quadrant, whose colour then fills the
-/// junction's centre. The fine election rejected those 29 of 81 corners (a fifth of the
-/// candidates elected, so the coarse passes were not tried), and the board lost three columns.
+/// A render blurred along the image diagonal (9 samples over 8 px): the board's perspective
+/// turns its corners' edges, and on one side of it the blur runs inside a quadrant, whose colour
+/// then fills the junction's centre. The fine election rejected those 29 of 81 corners (a fifth
+/// of the candidates elected, so the coarse passes were not tried), and the board lost three
+/// columns.
 #[test]
 fn diagonal_motion_blur_over_part_of_a_board_keeps_every_column() {
     let s = scene(Surface::Flat, 906, |_| ());
