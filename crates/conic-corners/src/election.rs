@@ -467,8 +467,8 @@ const MIN_FINE_CORNERS: usize = 9;
 /// give no coarse stride, is retried at the [`FALLBACK_STRIDES`] too. The pre-filter keeps about
 /// two candidates per corner; a board blurred along the diagonal of part of its squares elected
 /// a fifth of them (8 left it at that, missing 29 of 81 corners), and so did the photos' copies
-/// blurred horizontally over 9 px at half size, which gave two boards of 30–36 corners each
-/// instead of one of 75–90. The photos and the robustness report's scenes elect more.
+/// blurred horizontally over 9 px at half size, which gave two boards of 21–36 corners each (or
+/// one of 83) instead of one of 75–90. The photos and the robustness report's scenes elect more.
 const FEW_FINE_OF_CANDIDATES: usize = 4;
 /// Strides of the coarse passes tried when the fine pass elects too few corners.
 const FALLBACK_STRIDES: [usize; 3] = [2, 4, 8];
