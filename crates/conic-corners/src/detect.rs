@@ -483,13 +483,12 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     }
                     c
                 };
-                // Where a labelled neighbour is nearer than twice the window's radius (squares
-                // of a few pixels, slivers beside a silhouette), the window holds another
-                // junction's edges too: the estimate lands between the two (1.5–3 px off at
-                // 640 × 480, claiming σ 0.3 px) and is no evidence. Up to four radii the
-                // window is still not clear: the squares beyond the board's last labelled
-                // column, foreshortened further towards the silhouette, are slivers narrower
-                // than the window (`CLEAR_GRADIENT_RADII`).
+                // Where a labelled neighbour is near (squares of a few pixels, slivers beside a
+                // silhouette), the window holds another junction's edges too: the estimate
+                // lands between the two (1.5–3 px off at 640 × 480, claiming σ 0.3 px) and is
+                // no evidence. Beyond the board's last labelled column the squares narrow
+                // further towards the silhouette, so "near" reaches four window radii
+                // (`CLEAR_GRADIENT_RADII`).
                 let clear = nearest_labelled(&corners, b, &corners[i], (row, col))
                     >= CLEAR_GRADIENT_RADII * g.radius as f64;
                 let gradient = clear.then(|| gradient_corner(image, pixel, g)).flatten();

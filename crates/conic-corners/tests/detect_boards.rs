@@ -848,7 +848,7 @@ fn robustness_report() {
                     random_board_scene(&mut ChaCha8Rng::seed_from_u64(100 + seed), surface, &t);
                 pose(&mut s);
                 let r = s.render(seed).expect("valid scene");
-                let det = detect(&degrade(r.image.clone()), &DetectParams::default());
+                let det = detect(&degrade(r.image), &DetectParams::default());
                 none += usize::from(det.boards.is_empty());
                 let nearest = |x: f64, y: f64, visible_only: bool| {
                     r.corners
