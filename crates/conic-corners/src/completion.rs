@@ -81,7 +81,10 @@
 //!    step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an occluder cut
 //!    the edges) to a corner that is not [`Status::Failed`], or failing that by the gradient
 //!    estimate ([`crate::gradient`]: blurred or foreshortened junctions, as in the outer ring of
-//!    a bent board, leave the edge walks nothing to fit), within `max_offset` steps of `p̂`. A
+//!    a bent board, leave the edge walks nothing to fit) where the junction model confirms it
+//!    (as at a sliver: started there, it stays within 1.5 px with the board's contrast), else by
+//!    the junction model started at the search's position, else by the unconfirmed gradient
+//!    estimate, within `max_offset` steps of `p̂`. A
 //!    site outside the board's current label range, verified in the full frame, grows the
 //!    board: it needs a converged (two-sided) answer of [`refine_one`] or the junction model's
 //!    confirmation, since a border square's outer corner next to an occluder passes (a) and (b).
@@ -943,9 +946,10 @@ fn complete_one(
                     })
                 };
                 let angle = |d: P| d[1].atan2(d[0]).rem_euclid(std::f64::consts::PI);
-                // Where the sliver is too narrow for the walks, the junction model fitted within
-                // a quarter of the smaller grid step (the sliver's own width, about) must place
-                // it, with the board's contrast.
+                // The junction model's answer from `z`, fitted within a quarter of the smaller
+                // grid step (a sliver's own width, about), if it stays within
+                // `SLIVER_CONFIRM_SHIFT` of `z` with the board's contrast: where a sliver is too
+                // narrow for the walks, it must place the corner.
                 // Where the sliver's far edge lies inside that window, the model has it too: a
                 // line parallel to the boundary's grid line, on the outer side.
                 let junction_at = |z: P| -> Option<P> {
@@ -1018,7 +1022,25 @@ fn complete_one(
                     // verified, if it stays there.
                     placed.or_else(|| junction_at(q).map(|j| (j, Status::Fallback)).filter(near))?
                 } else {
-                    refined.or_else(last_resort).filter(near)?
+                    // Where the walks fail, the gradient estimate if the junction model confirms
+                    // it, else the junction model's own answer from the verified position:
+                    // beside a silhouette's slivers the gradient estimate lands pixels off a
+                    // junction that the model keeps (on a 640 × 480 cylinder corners 1.5–2 px
+                    // off, which then misled the predictions of the next rounds). The
+                    // unconfirmed gradient estimate is the last resort.
+                    match refined {
+                        Some(r) => Some(r).filter(near),
+                        None => {
+                            let g = last_resort().filter(near);
+                            match g {
+                                Some((z, _)) if junction_confirms(z) => g,
+                                _ => junction_at(q)
+                                    .map(|j| (j, Status::Fallback))
+                                    .filter(near)
+                                    .or(g),
+                            }
+                        }
+                    }?
                 };
                 // A site beyond the board's outer ring, verified in the full frame, grows the
                 // board: there a border square's outer corner next to an occluder or the
