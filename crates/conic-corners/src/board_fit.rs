@@ -1709,6 +1709,7 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal};
+    use std::ops::RangeInclusive;
 
     fn camera() -> PinholeCamera {
         PinholeCamera {
@@ -1908,17 +1909,21 @@ mod tests {
         assert!(off < 0.01 && off < 3.0 * sd, "kink: {off} σ {sd} {curve:?}");
     }
 
-    #[test]
-    fn a_piece_crossing_its_corner_over_a_wide_gap_carries_the_model_gap() {
-        // An edge through the corner at the origin whose bend grows along it (y = x²/200 +
-        // x³/8000), sampled every px with 0.01 px of noise from 30 to 80 px on one side and at
-        // one sample 22 px away on the other: the piece crosses the corner, but over a gap of
-        // three squares of 15 px. No curve of the models holds the cubic across it.
+    /// A one-piece row through the corner at the origin along the edge `y = x²/200 + x³/cubic`,
+    /// 0.01 px of noise: one sample at `x = lone` on one side and one every px over `run` on the
+    /// other. Returns how far the chosen curve passes from the corner and its σ there, for
+    /// squares of `support / 4` px.
+    fn lone_sample_case(
+        lone: f64,
+        run: RangeInclusive<i32>,
+        cubic: f64,
+        support: f64,
+    ) -> (f64, f64) {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let noise = Normal::new(0.0, 0.01).unwrap();
-        let edge = |x: f64| x * x / 200.0 + x * x * x / 8000.0;
-        let samples: Vec<[f64; 2]> = std::iter::once(-22.0)
-            .chain((30..=80).map(f64::from))
+        let edge = |x: f64| x * x / 200.0 + x * x * x / cubic;
+        let samples: Vec<[f64; 2]> = std::iter::once(lone)
+            .chain(run.map(f64::from))
             .map(|x| [x, edge(x) + noise.sample(&mut rng)])
             .collect();
         let line = FittedLine {
@@ -1932,8 +1937,16 @@ mod tests {
             samples,
             polarity_offset: 0.0,
         };
-        let c = choose_segment(&line, &FitCache::default(), 1, [0.0, 0.0], 60.0, 6).unwrap();
-        let (off, sd) = (c.curve.distance(0.0, 0.0).abs(), c.variance.sqrt());
+        let c = choose_segment(&line, &FitCache::default(), 1, [0.0, 0.0], support, 6).unwrap();
+        (c.curve.distance(0.0, 0.0).abs(), c.variance.sqrt())
+    }
+
+    #[test]
+    fn a_piece_crossing_its_corner_over_a_wide_gap_carries_the_model_gap() {
+        // The edge bends more and more (x³/8000), sampled from 30 to 80 px on one side and at
+        // one sample 22 px away on the other: the piece crosses the corner, but over a gap of
+        // three squares of 15 px. No curve of the models holds the cubic across it.
+        let (off, sd) = lone_sample_case(-22.0, 30..=80, 8000.0, 60.0);
         // 0.67 px off: σ 0.11 px if the piece counted as crossing the corner, 0.56 px with the
         // model gap.
         assert!(off < 2.0 * sd, "{off} px off, σ {sd}");
@@ -1941,31 +1954,11 @@ mod tests {
 
     #[test]
     fn a_piece_with_one_sample_on_a_side_of_its_corner_carries_the_model_gap() {
-        // An edge through the corner at the origin whose bend grows along it (y = x²/200 +
-        // x³/3000), squares of 30 px, 0.01 px of noise: one sample 9 px from the corner on the
-        // short edge towards the board's boundary, and every px from 10 to 85 px on the other
-        // side. The piece crosses the corner within a square on both sides, but on one side the
-        // lone sample only bends the curve's end: the corner is extrapolated.
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let noise = Normal::new(0.0, 0.01).unwrap();
-        let edge = |x: f64| x * x / 200.0 + x * x * x / 3000.0;
-        let samples: Vec<[f64; 2]> = std::iter::once(-9.0)
-            .chain((10..=85).map(f64::from))
-            .map(|x| [x, edge(x) + noise.sample(&mut rng)])
-            .collect();
-        let line = FittedLine {
-            kind: LineKind::Row,
-            index: 0,
-            segments: vec![FittedSegment {
-                samples: (0, samples.len()),
-                fit: None,
-                after_inflection: false,
-            }],
-            samples,
-            polarity_offset: 0.0,
-        };
-        let c = choose_segment(&line, &FitCache::default(), 1, [0.0, 0.0], 120.0, 6).unwrap();
-        let (off, sd) = (c.curve.distance(0.0, 0.0).abs(), c.variance.sqrt());
+        // The edge bends faster (x³/3000), squares of 30 px: one sample 9 px from the corner on
+        // the short edge towards the board's boundary, and every px from 10 to 85 px on the
+        // other side. The piece crosses the corner within a square on both sides, but on one
+        // side the lone sample only bends the curve's end: the corner is extrapolated.
+        let (off, sd) = lone_sample_case(-9.0, 10..=85, 3000.0, 120.0);
         // 0.14 px off: σ 0.037 px if the lone sample pinned the curve, 0.60 px with the model
         // gap.
         assert!(off < 2.0 * sd, "{off} px off, σ {sd}");

@@ -1007,6 +1007,8 @@ fn complete_one(
                 // junction model: walks that come back to it from 1.5 px are no evidence when
                 // they found no junction themselves (under a 0.3 mm dot gain they accepted one
                 // 2.5 px off the truth).
+                // The junction model's own answer from the position the search verified.
+                let modelled = || junction_at(q).map(|j| (j, Status::Fallback)).filter(near);
                 let (z, status) = if narrow {
                     let gradient = std::iter::once_with(|| last_resort().map(|g| (g, false)));
                     let placed = refined
@@ -1020,7 +1022,7 @@ fn complete_one(
                     // neighbours: the walks find no edge, and the gradient estimate lands
                     // pixels off): the junction model started at the junction the search
                     // verified, if it stays there.
-                    placed.or_else(|| junction_at(q).map(|j| (j, Status::Fallback)).filter(near))?
+                    placed.or_else(modelled)?
                 } else {
                     // Where the walks fail, the gradient estimate if the junction model confirms
                     // it, else the junction model's own answer from the verified position:
@@ -1032,13 +1034,9 @@ fn complete_one(
                         Some(r) => Some(r).filter(near),
                         None => {
                             let g = last_resort().filter(near);
-                            match g {
-                                Some((z, _)) if junction_confirms(z) => g,
-                                _ => junction_at(q)
-                                    .map(|j| (j, Status::Fallback))
-                                    .filter(near)
-                                    .or(g),
-                            }
+                            g.filter(|&(z, _)| junction_confirms(z))
+                                .or_else(modelled)
+                                .or(g)
                         }
                     }?
                 };
