@@ -565,8 +565,28 @@ const MIN_BRIDGE_VOTES: usize = 2;
 /// further step (perspective and bending change the step slowly along a line).
 const BRIDGE_TOLERANCE: f64 = 0.25;
 
+/// Largest skew (as `max_cell_skew` of [`ConnectivityParams`]) of a grid cell that spans the gap
+/// between two pieces of a board in [`merge_split_boards`].
+const BRIDGE_CELL_SKEW: f64 = 0.4;
+
+/// `|(p1 − p0) − (p3 − p2)|` over the mean side of the cell `p0 p1 p3 p2` (sides `p0 p1` and
+/// `p2 p3` opposite): 0 for a parallelogram.
+fn cell_skew(p: [(f64, f64); 4]) -> f64 {
+    let side = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0).hypot(b.1 - a.1);
+    let mean = 0.25 * (side(p[0], p[1]) + side(p[2], p[3]) + side(p[0], p[2]) + side(p[1], p[3]));
+    let d = (
+        p[1].0 - p[0].0 - p[3].0 + p[2].0,
+        p[1].1 - p[0].1 - p[3].1 + p[2].1,
+    );
+    d.0.hypot(d.1) / mean
+}
+
 /// Joins the pieces of one board that an occluder (a pen lying across it) split into several
-/// components.
+/// components. [`label_with`] applies it to the walked components; run it again once the pieces
+/// have grown (by [`crate::completion::complete_boards`]): a piece that met another across a
+/// gap along one grid line may meet it along two after completion. `boards` must be canonical
+/// (as [`label_with`] returns them), indexing `corners`; the result is sorted like
+/// [`label_with`]'s.
 ///
 /// At every corner of a board with a labelled predecessor along a grid axis but no successor,
 /// the grid line is extrapolated `k = 1 …` [`MAX_BRIDGE_STEPS`] steps with the last step
@@ -574,10 +594,13 @@ const BRIDGE_TOLERANCE: f64 = 0.25;
 /// first one that hits anything), and that board's own step there along the same axis agrees with
 /// the extrapolated step (within 30 % of the step), it votes for merging that board with the label
 /// offset that puts the hit corner `k` steps further. Both boards are in canonical orientation,
-/// so pieces of one board differ by a pure translation of labels. A board is merged into another
-/// when at least [`MIN_BRIDGE_VOTES`] grid lines agree and no label would be taken twice;
-/// repeated until nothing changes.
-fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> {
+/// so pieces of one board differ by a pure translation of labels. A hit at the next site (`k = 1`)
+/// whose steps disagree still votes when the neighbouring grid line also hits the same board at
+/// its next site with the same offset, and the cell the two links span across the gap has a skew
+/// of at most [`BRIDGE_CELL_SKEW`] (a grid line turning sharply where a bent board folds away
+/// from the camera). A board is merged into another when at least [`MIN_BRIDGE_VOTES`] grid
+/// lines agree and no label would be taken twice; repeated until nothing changes.
+pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> {
     const AXES: [(i32, i32); 4] = [(0, 1), (0, -1), (1, 0), (-1, 0)];
     let pos = |i: usize| (corners[i].x, corners[i].y);
     loop {
@@ -605,6 +628,9 @@ fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> 
         let mut merge: Option<(usize, usize, (i32, i32))> = None;
         for (a, board) in boards.iter().enumerate() {
             let mut votes: HashMap<(usize, (i32, i32)), usize> = HashMap::new();
+            // Hits at the next site whose steps disagree: (board, offset, label, axis, i, j).
+            let mut turning: Vec<(usize, (i32, i32), (i32, i32), (i32, i32), usize, usize)> =
+                Vec::new();
             for (&i, &l) in board.corners.iter().zip(&board.labels) {
                 for d in AXES {
                     if maps[a].contains_key(&(l.0 + d.0, l.1 + d.1)) {
@@ -644,13 +670,31 @@ fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> 
                                 let pn = pos(n);
                                 agrees((pj.0 - pn.0, pj.1 - pn.1))
                             });
+                            let off = (l.0 + k * d.0 - lj.0, l.1 + k * d.1 - lj.1);
                             if ahead || behind {
-                                let off = (l.0 + k * d.0 - lj.0, l.1 + k * d.1 - lj.1);
                                 *votes.entry((b, off)).or_default() += 1;
+                            } else if k == 1 {
+                                turning.push((b, off, l, d, i, j));
                             }
                         }
                         break;
                     }
+                }
+            }
+            // Where a bent board folds away from the camera its grid lines turn sharply at the
+            // gap, and the step of the far piece disagrees with the extrapolated one. Two
+            // neighbouring lines that each meet the far piece at the next site span a grid cell
+            // across the gap: both vote when it is nearly a parallelogram (as in `connect`).
+            for h in &turning {
+                let cell = turning.iter().any(|g| {
+                    let dl = (g.2 .0 - h.2 .0, g.2 .1 - h.2 .1);
+                    (g.0, g.1, g.3) == (h.0, h.1, h.3)
+                        && dl.0.abs() + dl.1.abs() == 1
+                        && dl.0 * h.3 .0 + dl.1 * h.3 .1 == 0
+                        && cell_skew([pos(h.4), pos(h.5), pos(g.4), pos(g.5)]) <= BRIDGE_CELL_SKEW
+                });
+                if cell {
+                    *votes.entry((h.0, h.1)).or_default() += 1;
                 }
             }
             let mut ranked: Vec<_> = votes.into_iter().collect();
@@ -1144,6 +1188,46 @@ mod tests {
         assert_eq!(b.len(), 1);
         assert_eq!(b[0].corners.len(), 90);
         assert_exact(&b[0], &t, theta);
+    }
+
+    #[test]
+    fn a_board_folding_away_from_the_camera_is_merged_across_the_fold() {
+        // The rows turn from +15° to −15° within a step around u = 4.8, like the grid lines where
+        // an S-shaped surface folds away: the links from column 4 to 5 lie 16.7° from the
+        // edges at column 5, outside θ_edge, so the grid splits there; the steps beyond the fold
+        // disagree with the extrapolated ones by half a step, but the cells across it are
+        // parallelograms.
+        let step = 30.0;
+        let heading = |u: f64| (15f64 - 15.0 * ((u - 4.8) / 0.3).tanh()).to_radians();
+        let fold = move |u: f64, v: f64| {
+            let n = (u * 400.0).ceil().max(1.0) as usize;
+            let du = u / n as f64;
+            let (mut x, mut y) = (100.0, 100.0 + v * step);
+            for k in 0..n {
+                let (s, c) = heading((k as f64 + 0.5) * du).sin_cos();
+                x += c * du * step;
+                y += s * du * step;
+            }
+            (x, y)
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (c, t) = grid(6, 10, &fold, &mut rng, 0.0, 0.0);
+        let g = connect(&c, &ConnectivityParams::default());
+        assert_graph_sane(&g, &t);
+        let across = |i: usize| {
+            g.neighbours[i]
+                .iter()
+                .flatten()
+                .any(|&j| t[i].unwrap().1 == 4 && t[j].unwrap().1 == 5)
+        };
+        assert!(
+            !(0..c.len()).any(across),
+            "the fold is linked: nothing to merge"
+        );
+        let b = label(&c, &g);
+        assert_eq!(b.len(), 1);
+        assert_eq!(b[0].corners.len(), 60);
+        assert_exact(&b[0], &t, 0.0);
     }
 
     #[test]

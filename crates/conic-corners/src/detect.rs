@@ -6,7 +6,8 @@
 use crate::board_fit::{fit_board_full, BoardFitParams, Path};
 use crate::completion::{complete_boards, split_by_phase, CompletionParams};
 use crate::connectivity::{
-    connect, label_with, Board as LabelledBoard, ConnectivityParams, LabelParams,
+    connect, label_with, merge_split_boards, Board as LabelledBoard, ConnectivityParams,
+    LabelParams,
 };
 use crate::election::{elect_scales, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
@@ -272,6 +273,13 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     // completed into the board they belong to.
     split_by_phase(image, &corners, &mut labelled, params.labels.min_corners);
     complete_boards(image, &mut corners, &mut labelled, &params.completion);
+    // Two pieces of a board that a pen or a finger split may line up across the gap along two
+    // grid lines (what a merge needs) only once each has been completed up to it.
+    let pieces = labelled.len();
+    labelled = merge_split_boards(&corners, labelled);
+    if labelled.len() < pieces {
+        complete_boards(image, &mut corners, &mut labelled, &params.completion);
+    }
     let completion_ms = ms(t);
     // Board mode fits the grid lines from the pixel-level corners (the walks measure the edges
     // themselves, and the fit only needs a corner within `max_shift` of the truth), so the local
