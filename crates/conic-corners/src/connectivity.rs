@@ -69,7 +69,10 @@
 //! canonical orientation, below) differ by a translation when they belong to one board; grid
 //! lines that end at a piece's border are extrapolated across the gap (up to 3 steps) and the
 //! pieces are merged when at least two lines land on the other piece with the same label offset
-//! and agreeing steps (`merge_split_boards`).
+//! and agreeing steps, or (where a bent board folds away from the camera and its lines turn
+//! sharply) when two neighbouring lines reach the other piece at their next site and span a
+//! parallelogram cell across the gap ([`merge_split_boards`]; `detect` runs it again after the
+//! completion has grown the pieces).
 //!
 //! **Canonical orientation.** Let `a` and `b` be the mean unit direction of the rays stepping
 //! `+1` along each of the two walk axes. The axis whose mean direction has the larger `|x|`
@@ -565,6 +568,31 @@ const MIN_BRIDGE_VOTES: usize = 2;
 /// further step (perspective and bending change the step slowly along a line).
 const BRIDGE_TOLERANCE: f64 = 0.25;
 
+/// Farthest (in steps) a grid line's next site may lie from its straight extrapolation when the
+/// line turns at a fold between two pieces (`turning` in [`merge_split_boards`]): a line turning
+/// by 40° within a step, where an S-shaped surface's ridge hides the surface beyond it.
+const TURN_REACH: f64 = 0.5;
+
+/// The steps of a board's grid line at label `l` (position `p`) along the label axis `e`: to the
+/// next corner and from the previous one, `None` when it has neither.
+fn step_at(
+    map: &HashMap<(i32, i32), usize>,
+    l: (i32, i32),
+    e: (i32, i32),
+    p: (f64, f64),
+    pos: &impl Fn(usize) -> (f64, f64),
+) -> Option<[Option<(f64, f64)>; 2]> {
+    let ahead = map.get(&(l.0 + e.0, l.1 + e.1)).map(|&n| {
+        let q = pos(n);
+        (q.0 - p.0, q.1 - p.1)
+    });
+    let behind = map.get(&(l.0 - e.0, l.1 - e.1)).map(|&n| {
+        let q = pos(n);
+        (p.0 - q.0, p.1 - q.1)
+    });
+    (ahead.is_some() || behind.is_some()).then_some([ahead, behind])
+}
+
 /// Largest skew (as `max_cell_skew` of [`ConnectivityParams`]) of a grid cell that spans the gap
 /// between two pieces of a board in [`merge_split_boards`].
 const BRIDGE_CELL_SKEW: f64 = 0.4;
@@ -593,12 +621,14 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// `p_i − p_prev`. If a corner of another board lies within the tolerance of a prediction (the
 /// first one that hits anything), and that board's own step there along the same axis agrees with
 /// the extrapolated step (within 30 % of the step), it votes for merging that board with the label
-/// offset that puts the hit corner `k` steps further. Both boards are in canonical orientation,
+/// offset that puts the hit corner `k` steps further. Where the hit corner has no step of its own
+/// along that axis (a completed row beyond a pen), its step along the other axis must agree with
+/// the extrapolating corner's instead. Both boards are in canonical orientation,
 /// so pieces of one board differ by a pure translation of labels. A hit at the next site (`k = 1`)
-/// whose steps disagree still votes when the neighbouring grid line also hits the same board at
-/// its next site with the same offset, and the cell the two links span across the gap has a skew
-/// of at most [`BRIDGE_CELL_SKEW`] (a grid line turning sharply where a bent board folds away
-/// from the camera). A board is merged into another when at least [`MIN_BRIDGE_VOTES`] grid
+/// whose steps disagree, or up to [`TURN_REACH`] steps from the prediction, still votes when the
+/// neighbouring grid line also hits the same board at its next site with the same offset, and the
+/// cell the two links span across the gap has a skew of at most [`BRIDGE_CELL_SKEW`] (a grid
+/// line turning sharply where a bent board folds away from the camera). A board is merged into another when at least [`MIN_BRIDGE_VOTES`] grid
 /// lines agree and no label would be taken twice; repeated until nothing changes.
 pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> {
     const AXES: [(i32, i32); 4] = [(0, 1), (0, -1), (1, 0), (-1, 0)];
@@ -648,30 +678,46 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                     for k in 1..=MAX_BRIDGE_STEPS {
                         let q = (pi.0 + k as f64 * v.0, pi.1 + k as f64 * v.1);
                         let tol = BRIDGE_TOLERANCE * step * (1.0 + 0.5 * (k - 1) as f64);
+                        let reach = if k == 1 { TURN_REACH * step } else { tol };
                         let hit = others
                             .iter()
                             .map(|&(b, j, lj)| {
                                 let pj = pos(j);
                                 ((pj.0 - q.0).hypot(pj.1 - q.1), b, j, lj)
                             })
-                            .filter(|t| t.0 < tol)
+                            .filter(|t| t.0 < reach)
                             .min_by(|x, y| x.0.total_cmp(&y.0));
-                        let Some((_, b, j, lj)) = hit else {
+                        let Some((dist, b, j, lj)) = hit else {
                             continue;
                         };
+                        let off = (l.0 + k * d.0 - lj.0, l.1 + k * d.1 - lj.1);
+                        if dist >= tol {
+                            // Only a fold bends the line that far within a step.
+                            if b != a {
+                                turning.push((b, off, l, d, i, j));
+                            }
+                            continue;
+                        }
                         if b != a {
                             let pj = pos(j);
-                            let agrees = |w: (f64, f64)| (w.0 - v.0).hypot(w.1 - v.1) < 0.3 * step;
-                            let ahead = maps[b].get(&(lj.0 + d.0, lj.1 + d.1)).is_some_and(|&n| {
-                                let pn = pos(n);
-                                agrees((pn.0 - pj.0, pn.1 - pj.1))
-                            });
-                            let behind = maps[b].get(&(lj.0 - d.0, lj.1 - d.1)).is_some_and(|&n| {
-                                let pn = pos(n);
-                                agrees((pj.0 - pn.0, pj.1 - pn.1))
-                            });
-                            let off = (l.0 + k * d.0 - lj.0, l.1 + k * d.1 - lj.1);
-                            if ahead || behind {
+                            let close = |w: (f64, f64), to: (f64, f64)| {
+                                (w.0 - to.0).hypot(w.1 - to.1) < 0.3 * to.0.hypot(to.1)
+                            };
+                            let along = step_at(&maps[b], lj, d, pj, &pos);
+                            // A piece with no step of its own along the line (one row of it
+                            // visible beyond a pen) is compared across the line instead.
+                            let e = (d.1, d.0);
+                            let agrees = match along {
+                                Some(w) => w.iter().flatten().any(|&w| close(w, v)),
+                                None => step_at(&maps[a], l, e, pi, &pos)
+                                    .zip(step_at(&maps[b], lj, e, pj, &pos))
+                                    .is_some_and(|(wa, wb)| {
+                                        let wa = wa.iter().flatten().next().copied();
+                                        let wb = wb.iter().flatten().next().copied();
+                                        wa.zip(wb).is_some_and(|(wa, wb)| close(wb, wa))
+                                    }),
+                            };
+                            if agrees {
                                 *votes.entry((b, off)).or_default() += 1;
                             } else if k == 1 {
                                 turning.push((b, off, l, d, i, j));
@@ -1192,42 +1238,75 @@ mod tests {
 
     #[test]
     fn a_board_folding_away_from_the_camera_is_merged_across_the_fold() {
-        // The rows turn from +15° to −15° within a step around u = 4.8, like the grid lines where
-        // an S-shaped surface folds away: the links from column 4 to 5 lie 16.7° from the
-        // edges at column 5, outside θ_edge, so the grid splits there; the steps beyond the fold
-        // disagree with the extrapolated ones by half a step, but the cells across it are
-        // parallelograms.
-        let step = 30.0;
-        let heading = |u: f64| (15f64 - 15.0 * ((u - 4.8) / 0.3).tanh()).to_radians();
-        let fold = move |u: f64, v: f64| {
-            let n = (u * 400.0).ceil().max(1.0) as usize;
-            let du = u / n as f64;
-            let (mut x, mut y) = (100.0, 100.0 + v * step);
-            for k in 0..n {
-                let (s, c) = heading((k as f64 + 0.5) * du).sin_cos();
-                x += c * du * step;
-                y += s * du * step;
+        // The rows turn from +h to −h within a step around u = c, like the grid lines where an
+        // S-shaped surface folds away. h = 15°, c = 4.8: the links from column 4 to 5 lie 16.7°
+        // from the edges at column 5, outside θ_edge, so the grid splits there; the steps
+        // beyond the fold disagree with the extrapolated ones by half a step, but the cells
+        // across it are parallelograms. h = 22°, c = 4.5 (a ridge): the links lie 21.7° from
+        // both ends, and column 5 lies 0.375 steps from the straight extrapolation of the rows.
+        for (h, c) in [(15f64, 4.8), (22.0, 4.5)] {
+            let step = 30.0;
+            let heading = move |u: f64| (h - h * ((u - c) / 0.2).tanh()).to_radians();
+            let fold = move |u: f64, v: f64| {
+                let n = (u * 400.0).ceil().max(1.0) as usize;
+                let du = u / n as f64;
+                let (mut x, mut y) = (100.0, 100.0 + v * step);
+                for k in 0..n {
+                    let (s, c) = heading((k as f64 + 0.5) * du).sin_cos();
+                    x += c * du * step;
+                    y += s * du * step;
+                }
+                (x, y)
+            };
+            let mut rng = ChaCha8Rng::seed_from_u64(11);
+            let (c, t) = grid(6, 10, &fold, &mut rng, 0.0, 0.0);
+            let g = connect(&c, &ConnectivityParams::default());
+            assert_graph_sane(&g, &t);
+            let across = |i: usize| {
+                g.neighbours[i]
+                    .iter()
+                    .flatten()
+                    .any(|&j| t[i].unwrap().1 == 4 && t[j].unwrap().1 == 5)
+            };
+            assert!(!(0..c.len()).any(across), "{h}°: the fold is linked");
+            let b = label(&c, &g);
+            assert_eq!(b.len(), 1, "{h}°");
+            assert_eq!(b[0].corners.len(), 60, "{h}°");
+            assert_exact(&b[0], &t, 0.0);
+        }
+    }
+
+    #[test]
+    fn a_piece_with_one_row_beyond_a_band_is_compared_across_its_columns() {
+        // Rows 0–4 (columns 1–5) above a band hiding row 5; below it row 6 (columns 0–2) and
+        // row 7 (columns 0–1), as a completion leaves them. Column 1 meets the lower piece with
+        // its own step down; column 2 meets (6, 2), which has no step down, and is compared by
+        // the rows' step instead.
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (c, t) = grid(8, 6, &rigid(0.1, 25.0), &mut rng, 0.3, 0.0);
+        let piece = |keep: &dyn Fn(i32, i32) -> bool| {
+            let mut v: Vec<((i32, i32), usize)> = (0..c.len())
+                .filter_map(|i| t[i].filter(|&(r, k)| keep(r, k)).map(|l| (l, i)))
+                .collect();
+            v.sort_unstable();
+            let (r0, c0) = (
+                v.iter().map(|x| x.0 .0).min().unwrap(),
+                v.iter().map(|x| x.0 .1).min().unwrap(),
+            );
+            let labels: Vec<(i32, i32)> = v.iter().map(|x| (x.0 .0 - r0, x.0 .1 - c0)).collect();
+            Board {
+                corners: v.iter().map(|x| x.1).collect(),
+                rows: labels.iter().map(|l| l.0 + 1).max().unwrap() as usize,
+                cols: labels.iter().map(|l| l.1 + 1).max().unwrap() as usize,
+                labels,
             }
-            (x, y)
         };
-        let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let (c, t) = grid(6, 10, &fold, &mut rng, 0.0, 0.0);
-        let g = connect(&c, &ConnectivityParams::default());
-        assert_graph_sane(&g, &t);
-        let across = |i: usize| {
-            g.neighbours[i]
-                .iter()
-                .flatten()
-                .any(|&j| t[i].unwrap().1 == 4 && t[j].unwrap().1 == 5)
-        };
-        assert!(
-            !(0..c.len()).any(across),
-            "the fold is linked: nothing to merge"
-        );
-        let b = label(&c, &g);
+        let upper = piece(&|r, k| r <= 4 && k >= 1);
+        let lower = piece(&|r, k| (r == 6 && k <= 2) || (r == 7 && k <= 1));
+        let b = merge_split_boards(&c, vec![upper, lower]);
         assert_eq!(b.len(), 1);
-        assert_eq!(b[0].corners.len(), 60);
-        assert_exact(&b[0], &t, 0.0);
+        assert_eq!(b[0].corners.len(), 30);
+        assert_exact(&b[0], &t, 0.1);
     }
 
     #[test]

@@ -415,29 +415,39 @@ fn real_photos_when_present() {
 ///   completed;
 /// - `curve_6.jpg`'s bottom half: the S folds away between columns 5 and 6, where the rows turn
 ///   by 15–30° within a step (the grid links stop there, and the steps beyond the fold disagree
-///   with the extrapolated ones by half a step).
+///   with the extrapolated ones by half a step);
+/// - two smaller crops: `curve_4.jpg` at the S's ridge, where the rows turn by 40° within a step
+///   (the next column lies 0.35 steps off the straight extrapolation), and `marker_real3.jpg`
+///   where one row is visible beyond the pens (its completed corners have no step down).
 #[test]
-fn half_photos_split_by_an_occluder_or_a_fold_give_one_board() {
+fn parts_of_photos_split_by_an_occluder_or_a_fold_give_one_board() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/images/curved-hydramarker");
     if !dir.is_dir() {
         eprintln!("skipped: {} not found", dir.display());
         return;
     }
-    for (name, halves) in [
-        ("marker_real3.jpg", ["top", "right"].as_slice()),
-        ("curve_6.jpg", ["bottom"].as_slice()),
-    ] {
+    // (x0, y0, width, height); 0 for "to the photo's edge".
+    let parts: [(&str, &[(&str, [usize; 4])]); 3] = [
+        (
+            "marker_real3.jpg",
+            &[
+                ("top half", [0, 0, 0, 1109]),
+                ("right half", [1211, 0, 0, 0]),
+                ("pens", [755, 1002, 1530, 1024]),
+            ],
+        ),
+        ("curve_6.jpg", &[("bottom half", [0, 2000, 0, 0])]),
+        ("curve_4.jpg", &[("ridge", [98, 734, 381, 545])]),
+    ];
+    for (name, parts) in parts {
         let photo = GrayImage::open(dir.join(name)).expect("readable photo");
         let whole = detect(&photo, &DetectParams::default());
         assert_eq!(whole.boards.len(), 1, "{name}");
         let (w, h) = (photo.width(), photo.height());
-        for &half in halves {
-            let (x0, y0, cw, ch) = match half {
-                "top" => (0, 0, w, h / 2),
-                "bottom" => (0, h / 2, w, h - h / 2),
-                _ => (w / 2, 0, w - w / 2, h),
-            };
+        for &(half, [x0, y0, cw, ch]) in parts {
+            let cw = if cw == 0 { w - x0 } else { cw };
+            let ch = if ch == 0 { h - y0 } else { ch };
             let data = (y0..y0 + ch)
                 .flat_map(|y| photo.row(y)[x0..x0 + cw].iter().copied())
                 .collect();
