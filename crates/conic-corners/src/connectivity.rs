@@ -573,6 +573,11 @@ const BRIDGE_TOLERANCE: f64 = 0.25;
 /// by 40° within a step, where an S-shaped surface's ridge hides the surface beyond it.
 const TURN_REACH: f64 = 0.5;
 
+/// Largest ratio between the steps on either side of a fold (`turning` in
+/// [`merge_split_boards`]): 1.33 where `curve_6.jpg`'s S folds away, 2 where a link of the far
+/// piece jumps a column hidden behind a pen.
+const TURN_STEP_RATIO: f64 = 1.5;
+
 /// The steps of a board's grid line at label `l` (position `p`) along the label axis `e`: to the
 /// next corner and from the previous one, `None` when it has neither.
 fn step_at(
@@ -626,6 +631,7 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// the extrapolating corner's instead. Both boards are in canonical orientation,
 /// so pieces of one board differ by a pure translation of labels. A hit at the next site (`k = 1`)
 /// whose steps disagree, or up to [`TURN_REACH`] steps from the prediction, still votes when the
+/// far piece's steps there are within [`TURN_STEP_RATIO`] of the extrapolated one, the
 /// neighbouring grid line also hits the same board at its next site with the same offset, and the
 /// cell the two links span across the gap has a skew of at most [`BRIDGE_CELL_SKEW`] (a grid
 /// line turning sharply where a bent board folds away from the camera). A board is merged into another when at least [`MIN_BRIDGE_VOTES`] grid
@@ -691,19 +697,27 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                             continue;
                         };
                         let off = (l.0 + k * d.0 - lj.0, l.1 + k * d.1 - lj.1);
+                        let pj = pos(j);
+                        let along = step_at(&maps[b], lj, d, pj, &pos);
+                        // A fold turns the line but keeps its step: a far piece stepping twice
+                        // as far has a link that jumps a column hidden behind a pen.
+                        let turns = b != a
+                            && k == 1
+                            && along.iter().flatten().flatten().all(|w| {
+                                let r = w.0.hypot(w.1) / step;
+                                r < TURN_STEP_RATIO && r * TURN_STEP_RATIO > 1.0
+                            });
                         if dist >= tol {
                             // Only a fold bends the line that far within a step.
-                            if b != a {
+                            if turns {
                                 turning.push((b, off, l, d, i, j));
                             }
                             continue;
                         }
                         if b != a {
-                            let pj = pos(j);
                             let close = |w: (f64, f64), to: (f64, f64)| {
                                 (w.0 - to.0).hypot(w.1 - to.1) < 0.3 * to.0.hypot(to.1)
                             };
-                            let along = step_at(&maps[b], lj, d, pj, &pos);
                             // A piece with no step of its own along the line (one row of it
                             // visible beyond a pen) is compared across the line instead.
                             let e = (d.1, d.0);
@@ -719,7 +733,7 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                             };
                             if agrees {
                                 *votes.entry((b, off)).or_default() += 1;
-                            } else if k == 1 {
+                            } else if turns {
                                 turning.push((b, off, l, d, i, j));
                             }
                         }
@@ -1274,6 +1288,33 @@ mod tests {
             assert_eq!(b[0].corners.len(), 60, "{h}°");
             assert_exact(&b[0], &t, 0.0);
         }
+    }
+
+    #[test]
+    fn a_piece_whose_links_jump_a_hidden_column_is_not_merged_as_a_fold() {
+        // A pen hides column 3: the far piece holds columns 2 and 4, linked as neighbours (the
+        // cells spanning the pen support each other). Column 1 reaches column 2 at the next site
+        // with a step half the far piece's, which a fold does not do.
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let (c, t) = grid(4, 6, &rigid(0.05, 40.0), &mut rng, 0.3, 0.0);
+        let board = |cols: &[i32]| {
+            let mut v: Vec<((i32, i32), usize)> = (0..c.len())
+                .filter_map(|i| {
+                    let (r, k) = t[i].unwrap();
+                    let slot = cols.iter().position(|&x| x == k)?;
+                    Some(((r, slot as i32), i))
+                })
+                .collect();
+            v.sort_unstable();
+            Board {
+                corners: v.iter().map(|x| x.1).collect(),
+                labels: v.iter().map(|x| x.0).collect(),
+                rows: 4,
+                cols: cols.len(),
+            }
+        };
+        let b = merge_split_boards(&c, vec![board(&[0, 1]), board(&[2, 4])]);
+        assert_eq!(b.len(), 2);
     }
 
     #[test]

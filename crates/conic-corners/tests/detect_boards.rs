@@ -418,7 +418,9 @@ fn real_photos_when_present() {
 ///   with the extrapolated ones by half a step);
 /// - two smaller crops: `curve_4.jpg` at the S's ridge, where the rows turn by 40° within a step
 ///   (the next column lies 0.35 steps off the straight extrapolation), and `marker_real3.jpg`
-///   where one row is visible beyond the pens (its completed corners have no step down).
+///   where one row is visible beyond the pens (its completed corners have no step down);
+/// - `marker_real3.jpg` beside an upright pen that hides one column: the piece beyond it links
+///   the columns on either side of the pen as neighbours, and must not be merged as a fold.
 #[test]
 fn parts_of_photos_split_by_an_occluder_or_a_fold_give_one_board() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -435,6 +437,7 @@ fn parts_of_photos_split_by_an_occluder_or_a_fold_give_one_board() {
                 ("top half", [0, 0, 0, 1109]),
                 ("right half", [1211, 0, 0, 0]),
                 ("pens", [755, 1002, 1530, 1024]),
+                ("upright pen", [80, 1003, 1019, 954]),
             ],
         ),
         ("curve_6.jpg", &[("bottom half", [0, 2000, 0, 0])]),

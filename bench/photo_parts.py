@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Parts of the real photos: does `detect` give one board, labelled like the whole photo?
+
+Usage: photo_parts.py --cli CLI [--baseline CLI2] [--photos DIR] --out DIR [--random N] [--seed S]
+
+A part of a photo shows less of the board, so the pieces on either side of a pen, a finger or a
+fold of the surface meet along fewer grid lines than in the whole photo. For every photo (grey,
+Pillow's `L`), the parts are its four halves, its four quarters and N random windows (each side
+1/4 to 3/4 of the photo's, seeded). CLI runs `detect` on the whole photo and on every part. A
+part's board corner within 3 px of a corner of the whole photo's board gives a label offset
+(whole minus part); a board whose corners give more than one offset is mislabelled. A part that
+gives more than one board is split (two boards of one photo are never right: each photo shows
+one board). A part that gives no board is listed too (some show no board at all, or a single
+column of it). With a baseline CLI, the parts whose outcome differs are marked. Exit status 0.
+"""
+import argparse
+import collections
+import json
+import pathlib
+import random
+import subprocess
+import sys
+
+from PIL import Image
+
+
+def detect(cli, path):
+    run = subprocess.run([cli, "detect", str(path)], capture_output=True, text=True)
+    if run.returncode != 0:
+        sys.exit(f"photo_parts: {cli} failed on {path}: {run.stderr.strip()}")
+    return json.loads(run.stdout)["boards"]
+
+
+def outcome(boards, whole, x0, y0):
+    """(corners per board, label offsets per board, unmatched corners per board)."""
+    ref = [c for b in whole for c in b["corners"]]
+    out = []
+    for b in boards:
+        offsets, unmatched = collections.Counter(), 0
+        for c in b["corners"]:
+            x, y = c["x"] + x0, c["y"] + y0
+            m = min(ref, key=lambda r: (r["x"] - x) ** 2 + (r["y"] - y) ** 2)
+            if ((m["x"] - x) ** 2 + (m["y"] - y) ** 2) ** 0.5 > 3:
+                unmatched += 1
+            else:
+                offsets[(m["row"] - c["row"], m["col"] - c["col"])] += 1
+        out.append((len(b["corners"]), len(offsets), unmatched))
+    return out
+
+
+def verdict(out):
+    if not out:
+        return "no board"
+    if len(out) > 1:
+        return "split"
+    return "mislabelled" if out[0][1] > 1 else "ok"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cli", required=True)
+    ap.add_argument("--baseline")
+    ap.add_argument("--photos", default="../shared/images/curved-hydramarker")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--random", type=int, default=12)
+    ap.add_argument("--seed", type=int, default=4)
+    args = ap.parse_args()
+    photos, out = pathlib.Path(args.photos), pathlib.Path(args.out)
+    if not photos.is_dir():
+        sys.exit(f"photo_parts: {photos} not found")
+    out.mkdir(parents=True, exist_ok=True)
+    rng = random.Random(args.seed)
+    clis = [args.cli] + ([args.baseline] if args.baseline else [])
+    counts = [collections.Counter() for _ in clis]
+    differ = 0
+    for f in sorted(photos.glob("*.jpg")):
+        im = Image.open(f).convert("L")
+        w, h = im.size
+        boxes = {
+            "top": (0, 0, w, h // 2), "bottom": (0, h // 2, w, h),
+            "left": (0, 0, w // 2, h), "right": (w // 2, 0, w, h),
+        }
+        for i in range(2):
+            for j in range(2):
+                boxes[f"q{i}{j}"] = (i * w // 2, j * h // 2, (i + 1) * w // 2, (j + 1) * h // 2)
+        for k in range(args.random):
+            cw, ch = rng.randint(w // 4, 3 * w // 4), rng.randint(h // 4, 3 * h // 4)
+            x, y = rng.randint(0, w - cw), rng.randint(0, h - ch)
+            boxes[f"r{k}"] = (x, y, x + cw, y + ch)
+        whole_png = out / f"{f.stem}.png"
+        im.save(whole_png)
+        wholes = [detect(cli, whole_png) for cli in clis]
+        for tag, box in boxes.items():
+            path = out / f"{f.stem}_{tag}.png"
+            im.crop(box).save(path)
+            results = [outcome(detect(cli, path), whole, box[0], box[1]) for cli, whole in zip(clis, wholes)]
+            verdicts = [verdict(r) for r in results]
+            for c, v in zip(counts, verdicts):
+                c[v] += 1
+            line = f"{path.name:24s} {str(box):28s} {verdicts[0]:12s} {results[0]}"
+            if len(results) > 1 and verdicts[1] != verdicts[0]:
+                differ += 1
+                line += f"   baseline {verdicts[1]} {results[1]}"
+            print(line, flush=True)
+    for cli, c in zip(clis, counts):
+        print(f"{cli}: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())))
+    if args.baseline:
+        print(f"{differ} parts differ from the baseline")
+
+
+if __name__ == "__main__":
+    main()
