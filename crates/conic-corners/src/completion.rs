@@ -518,7 +518,8 @@ const TYPICAL_ON_LATTICE: f64 = 0.8;
 /// Checks the labels of every board against the checker pattern (first step of the rule in the
 /// [module docs](self)). A board where every measured corner agrees, each by at least
 /// [`ON_LATTICE`], is left alone. Otherwise the corners below it are dropped, the others grouped
-/// by phase (the undecided ones join their 4-neighbours' group), each
+/// by phase (the undecided ones join the group of most of their decided 4-neighbours, at least
+/// two of them), each
 /// group is split into pieces connected by label steps of one, and each piece with at least
 /// `min_corners` corners (the labelling's smallest board, [`crate::connectivity::LabelParams`])
 /// over two rows and two columns becomes a board of its own (canonical labels, largest first,
@@ -596,7 +597,10 @@ fn split_board(
             .into_iter()
             .filter_map(move |(dr, dc)| index.get(&(t.0 + dr, t.1 + dc)).copied())
     };
-    // Undecided corners take the phase of most of their decided 4-neighbours (none: dropped).
+    // Undecided corners take the phase of most of their decided 4-neighbours, at least two of
+    // them: a board fails this check because some of its links are wrong, and a corner with
+    // one decided neighbour may hang on a wrong link (two rows either side of a pen, linked as
+    // neighbours, where the lower row's samples leave the image).
     let phase: Vec<Option<bool>> = (0..sign.len())
         .map(|k| {
             if off_lattice(k) {
@@ -607,7 +611,7 @@ fn split_board(
                     .filter(|&j| !off_lattice(j))
                     .filter_map(|j| sign[j])
                     .fold((0, 0), |(p, n), s| if s { (p + 1, n) } else { (p, n + 1) });
-                (p != n).then_some(p > n)
+                (p.max(n) >= 2 && p != n).then_some(p > n)
             })
         })
         .collect();

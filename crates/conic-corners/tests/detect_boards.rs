@@ -420,9 +420,12 @@ fn real_photos_when_present() {
 ///   (the next column lies 0.35 steps off the straight extrapolation), and `marker_real3.jpg`
 ///   where one row is visible beyond the pens (its completed corners have no step down);
 /// - `marker_real3.jpg` beside an upright pen that hides one column: the piece beyond it links
-///   the columns on either side of the pen as neighbours, and must not be merged as a fold.
+///   the columns on either side of the pen as neighbours, and must not be merged as a fold;
+/// - `marker_real3.jpg` with a pen hiding row 8 and only rows 7 and 9 in view: the two rows are
+///   linked as neighbours, and the checker phases disagree; the corners of row 9 whose
+///   measurement leaves the image must not follow row 7's phase (no board is right here).
 #[test]
-fn parts_of_photos_split_by_an_occluder_or_a_fold_give_one_board() {
+fn parts_of_photos_split_by_an_occluder_or_a_fold_are_labelled_like_the_whole() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/images/curved-hydramarker");
     if !dir.is_dir() {
@@ -438,6 +441,7 @@ fn parts_of_photos_split_by_an_occluder_or_a_fold_give_one_board() {
                 ("right half", [1211, 0, 0, 0]),
                 ("pens", [755, 1002, 1530, 1024]),
                 ("upright pen", [80, 1003, 1019, 954]),
+                ("rows either side of a pen", [261, 1389, 1369, 579]),
             ],
         ),
         ("curve_6.jpg", &[("bottom half", [0, 2000, 0, 0])]),
@@ -456,6 +460,12 @@ fn parts_of_photos_split_by_an_occluder_or_a_fold_give_one_board() {
                 .collect();
             let crop = GrayImage::from_vec(cw, ch, data).unwrap();
             let det = detect(&crop, &DetectParams::default());
+            if half == "rows either side of a pen" {
+                // Rows 7 and 9 only, linked as neighbours across the pen, where nothing tells
+                // the step: no board (it was one with rows 7 and 9 labelled 0 and 1).
+                assert!(det.boards.is_empty(), "{name} {half}");
+                continue;
+            }
             assert_eq!(det.boards.len(), 1, "{name} {half}");
             let mut offsets: HashMap<(i32, i32), usize> = HashMap::new();
             for c in &det.boards[0].corners {
