@@ -199,6 +199,18 @@ const ALIGNED_REACH: f64 = 1.3;
 /// Never panics: unusable corners (non-finite, degenerate orientations) and coincident duplicates
 /// (all but one) simply get no links. O(n log n) for n corners.
 pub fn connect(corners: &[Corner], params: &ConnectivityParams) -> Graph {
+    connect_seen(corners, params, |_, _| true)
+}
+
+/// [`connect`], where a link between corners `i` and `j` (called with `i < j`) is made only if
+/// `seen(i, j)`: the image's evidence that one grid edge runs between them (`detect` passes
+/// [`crate::completion::edge_seen`]). A refused link is refused before the pruning of step 4, so
+/// the cells it supported go with it.
+pub fn connect_seen(
+    corners: &[Corner],
+    params: &ConnectivityParams,
+    seen: impl Fn(usize, usize) -> bool,
+) -> Graph {
     let n = corners.len();
     let mut graph = Graph {
         neighbours: vec![[None; 4]; n],
@@ -313,7 +325,7 @@ pub fn connect(corners: &[Corner], params: &ConnectivityParams) -> Graph {
     for i in 0..n {
         for slot in 0..4 {
             if let Some((j, _)) = pick[i][slot] {
-                if pick[j].iter().flatten().any(|&(k, _)| k == i) {
+                if pick[j].iter().flatten().any(|&(k, _)| k == i) && seen(i.min(j), i.max(j)) {
                     graph.neighbours[i][slot] = Some(j);
                 }
             }

@@ -4,9 +4,9 @@
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
 use crate::board_fit::{fit_board_full, BoardFitParams, Path};
-use crate::completion::{complete_boards, split_by_phase, CompletionParams};
+use crate::completion::{complete_boards, edge_seen, split_by_phase, CompletionParams};
 use crate::connectivity::{
-    connect, label_with, merge_split_boards, Board as LabelledBoard, ConnectivityParams,
+    connect_seen, label_with, merge_split_boards, Board as LabelledBoard, ConnectivityParams,
     LabelParams,
 };
 use crate::election::{elect_scales, Corner, ElectionParams};
@@ -263,7 +263,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     drop(scales); // the average, a quarter of the image, is not needed further on
     let election_ms = ms(t);
     let t = Instant::now();
-    let graph = connect(&corners, &params.connectivity);
+    let graph = connect_seen(&corners, &params.connectivity, |i, j| {
+        let (a, b) = (&corners[i], &corners[j]);
+        edge_seen(image, [a.x, a.y], [b.x, b.y])
+    });
     let mut labelled = label_with(&corners, &graph, &params.labels);
     let connectivity_ms = ms(t);
     // Completed corners are appended to `corners` (beyond `graph`'s range) and go through the
