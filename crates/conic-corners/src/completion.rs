@@ -518,9 +518,9 @@ const EDGE_MIDDLE_CONTRAST: f64 = 0.35;
 /// 65 %) the largest difference of that sign must reach [`EDGE_MIDDLE_CONTRAST`] of the smaller
 /// end's magnitude, at all three (with two of three, the noisy half-size copy of `curve_4.jpg`
 /// kept a corner labelled one row and one column off, as without this check). The largest
-/// difference, not a mean: the square beside the edge may be a
-/// sliver a few pixels wide at a silhouette, and a grid line curving off its chord leaves the
-/// nearest samples on the wrong side. A link that jumps a row hidden under a pen or a finger has
+/// difference, not a mean: the square beside the edge may be a sliver a few pixels wide at a
+/// silhouette, and a grid line curving off its chord leaves the nearest samples on the wrong
+/// side. A link that jumps a row hidden under a pen or a finger has
 /// no edge in the middle; one that jumps a corner the election missed has the squares swap
 /// sides. Samples off the image decide nothing (true), as does a segment shorter than 4 px.
 pub fn edge_seen(image: &GrayImage, a: P, b: P) -> bool {

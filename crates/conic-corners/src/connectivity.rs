@@ -390,16 +390,7 @@ fn continued(graph: &Graph, corners: &[Corner], j: usize, from: usize) -> Option
 fn has_quad(graph: &Graph, corners: &[Corner], max_skew: f64, i: usize, slot: usize) -> bool {
     let nb = &graph.neighbours;
     let p = |a: usize| (corners[a].x, corners[a].y);
-    // |p_i + p_l − p_j − p_k| against the mean side: 0 for a parallelogram.
-    let cell_ok = |j: usize, l: usize, k: usize| {
-        let (pi, pj, pl, pk) = (p(i), p(j), p(l), p(k));
-        let skew = (pi.0 + pl.0 - pj.0 - pk.0).hypot(pi.1 + pl.1 - pj.1 - pk.1);
-        let side = (pj.0 - pi.0).hypot(pj.1 - pi.1)
-            + (pl.0 - pj.0).hypot(pl.1 - pj.1)
-            + (pk.0 - pl.0).hypot(pk.1 - pl.1)
-            + (pi.0 - pk.0).hypot(pi.1 - pk.1);
-        skew <= max_skew * side / 4.0
-    };
+    let cell_ok = |j: usize, l: usize, k: usize| cell_skew([p(i), p(j), p(l), p(k)]) <= max_skew;
     let Some(j) = nb[i][slot] else {
         return false;
     };
@@ -610,18 +601,14 @@ fn step_at(
     (ahead.is_some() || behind.is_some()).then_some([ahead, behind])
 }
 
-/// Largest skew (as `max_cell_skew` of [`ConnectivityParams`]) of a grid cell that spans the gap
-/// between two pieces of a board in [`merge_split_boards`].
-const BRIDGE_CELL_SKEW: f64 = 0.4;
-
-/// `|(p1 − p0) − (p3 − p2)|` over the mean side of the cell `p0 p1 p3 p2` (sides `p0 p1` and
-/// `p2 p3` opposite): 0 for a parallelogram.
+/// Skew of the cell `p0 p1 p2 p3` (corners in order around it): `|p0 + p2 − p1 − p3|` over its
+/// mean side, 0 for a parallelogram.
 fn cell_skew(p: [(f64, f64); 4]) -> f64 {
     let side = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0).hypot(b.1 - a.1);
-    let mean = 0.25 * (side(p[0], p[1]) + side(p[2], p[3]) + side(p[0], p[2]) + side(p[1], p[3]));
+    let mean = 0.25 * (side(p[0], p[1]) + side(p[1], p[2]) + side(p[2], p[3]) + side(p[3], p[0]));
     let d = (
-        p[1].0 - p[0].0 - p[3].0 + p[2].0,
-        p[1].1 - p[0].1 - p[3].1 + p[2].1,
+        p[0].0 + p[2].0 - p[1].0 - p[3].0,
+        p[0].1 + p[2].1 - p[1].1 - p[3].1,
     );
     d.0.hypot(d.1) / mean
 }
@@ -640,17 +627,20 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// the extrapolated step (within 30 % of the step), it votes for merging that board with the label
 /// offset that puts the hit corner `k` steps further. Where the hit corner has no step of its own
 /// along that axis (a completed row beyond a pen), its step along the other axis must agree with
-/// the extrapolating corner's instead. Both boards are in canonical orientation,
-/// so pieces of one board differ by a pure translation of labels. A hit at the next site (`k = 1`)
+/// the extrapolating corner's instead. Both boards are in canonical orientation, so pieces of
+/// one board differ by a pure translation of labels. A hit at the next site (`k = 1`)
 /// whose steps disagree, or up to [`TURN_REACH`] steps from the prediction, still votes when the
 /// far piece's steps there are within [`TURN_STEP_RATIO`] of the extrapolated one, the
 /// neighbouring grid line also hits the same board at its next site with the same offset, and the
-/// cell the two links span across the gap has a skew of at most [`BRIDGE_CELL_SKEW`] (a grid
-/// line turning sharply where a bent board folds away from the camera). A board is merged into another when at least [`MIN_BRIDGE_VOTES`] grid
-/// lines agree and no label would be taken twice; repeated until nothing changes.
+/// cell the two links span across the gap is no more skewed than [`connect`] lets a supporting
+/// cell be (`max_cell_skew` of the default [`ConnectivityParams`]): a grid line turning sharply
+/// where a bent board folds away from the camera. A board is merged into another when at least
+/// [`MIN_BRIDGE_VOTES`] grid lines agree and no label would be taken twice; repeated until
+/// nothing changes.
 pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> {
     const AXES: [(i32, i32); 4] = [(0, 1), (0, -1), (1, 0), (-1, 0)];
     let pos = |i: usize| (corners[i].x, corners[i].y);
+    let max_skew = ConnectivityParams::default().max_cell_skew;
     loop {
         sort_boards(&mut boards);
         let maps: Vec<HashMap<(i32, i32), usize>> = boards
@@ -763,7 +753,7 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                     (g.0, g.1, g.3) == (h.0, h.1, h.3)
                         && dl.0.abs() + dl.1.abs() == 1
                         && dl.0 * h.3 .0 + dl.1 * h.3 .1 == 0
-                        && cell_skew([pos(h.4), pos(h.5), pos(g.4), pos(g.5)]) <= BRIDGE_CELL_SKEW
+                        && cell_skew([pos(h.4), pos(h.5), pos(g.5), pos(g.4)]) <= max_skew
                 });
                 if cell {
                     *votes.entry((h.0, h.1)).or_default() += 1;
