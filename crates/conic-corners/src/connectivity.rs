@@ -725,13 +725,14 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                             let e = (d.1, d.0);
                             let agrees = match along {
                                 Some(w) => w.iter().flatten().any(|&w| close(w, v)),
-                                None => step_at(&maps[a], l, e, pi, &pos)
-                                    .zip(step_at(&maps[b], lj, e, pj, &pos))
-                                    .is_some_and(|(wa, wb)| {
-                                        let wa = wa.iter().flatten().next().copied();
-                                        let wb = wb.iter().flatten().next().copied();
-                                        wa.zip(wb).is_some_and(|(wa, wb)| close(wb, wa))
-                                    }),
+                                None => {
+                                    let across = |m: &HashMap<_, _>, l, p| {
+                                        step_at(m, l, e, p, &pos)?.into_iter().flatten().next()
+                                    };
+                                    across(&maps[a], l, pi)
+                                        .zip(across(&maps[b], lj, pj))
+                                        .is_some_and(|(wa, wb)| close(wb, wa))
+                                }
                             };
                             if agrees {
                                 *votes.entry((b, off)).or_default() += 1;

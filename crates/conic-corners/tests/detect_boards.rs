@@ -312,14 +312,22 @@ fn inside(h: &[(f64, f64)], q: (f64, f64)) -> bool {
         })
 }
 
-#[test]
-fn real_photos_when_present() {
+/// The real photos' directory, `None` (with a note) where it is absent.
+fn photos() -> Option<std::path::PathBuf> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/images/curved-hydramarker");
     if !dir.is_dir() {
         eprintln!("skipped: {} not found", dir.display());
-        return;
+        return None;
     }
+    Some(dir)
+}
+
+#[test]
+fn real_photos_when_present() {
+    let Some(dir) = photos() else {
+        return;
+    };
     // Labelled corners achieved (lower bounds); each photo shows one board.
     let expected = [
         ("curve_4.jpg", 110),
@@ -429,12 +437,9 @@ fn real_photos_when_present() {
 ///   ([`conic_corners::completion::edge_seen`]).
 #[test]
 fn parts_of_photos_split_by_an_occluder_or_a_fold_are_labelled_like_the_whole() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/images/curved-hydramarker");
-    if !dir.is_dir() {
-        eprintln!("skipped: {} not found", dir.display());
+    let Some(dir) = photos() else {
         return;
-    }
+    };
     // (x0, y0, width, height); 0 for "to the photo's edge".
     let parts: [(&str, &[(&str, [usize; 4])]); 3] = [
         (
