@@ -2,13 +2,16 @@
 """Parts of the real photos: does `detect` give one board, labelled like the whole photo?
 
 Usage: photo_parts.py --cli CLI [--baseline CLI2] [--photos DIR] --out DIR [--random N] [--seed S]
+                      [--scale F]
 
 A part of a photo shows less of the board, so the pieces on either side of a pen, a finger or a
 fold of the surface meet along fewer grid lines than in the whole photo. For every photo (grey,
 Pillow's `L`), the parts are its four halves, its four quarters and N random windows (each side
-1/4 to 3/4 of the photo's, seeded). CLI runs `detect` on the whole photo and on every part. A
-part's board corner within 3 px of a corner of the whole photo's board gives a label offset
-(whole minus part); a board whose corners give more than one offset is mislabelled. A part that
+1/4 to 3/4 of the photo's, seeded), each scaled by F (Pillow's Lanczos filter; 1: as cut), as a
+board seen from farther away. CLI runs `detect` on the whole photo and on every part. A part's
+board corner within 3 of the part's pixels of a corner of the whole photo's board (mapped into
+the photo's pixels, pixel centres at integers: `x = (x_part + 0.5) / F - 0.5 + left`) gives a
+label offset (whole minus part); a board whose corners give more than one offset is mislabelled. A part that
 gives more than one board is split (two boards of one photo are never right: each photo shows
 one board). A part that gives no board is listed too (some show no board at all, or a single
 column of it). With a baseline CLI, the parts whose outcome differs are marked. Exit status 0.
@@ -31,16 +34,17 @@ def detect(cli, path):
     return json.loads(run.stdout)["boards"]
 
 
-def outcome(boards, whole, x0, y0):
+def outcome(boards, whole, x0, y0, scale):
     """(corners per board, label offsets per board, unmatched corners per board)."""
     ref = [c for b in whole for c in b["corners"]]
     out = []
     for b in boards:
         offsets, unmatched = collections.Counter(), 0
         for c in b["corners"]:
-            x, y = c["x"] + x0, c["y"] + y0
+            x = (c["x"] + 0.5) / scale - 0.5 + x0
+            y = (c["y"] + 0.5) / scale - 0.5 + y0
             m = min(ref, key=lambda r: (r["x"] - x) ** 2 + (r["y"] - y) ** 2)
-            if ((m["x"] - x) ** 2 + (m["y"] - y) ** 2) ** 0.5 > 3:
+            if ((m["x"] - x) ** 2 + (m["y"] - y) ** 2) ** 0.5 > 3 / scale:
                 unmatched += 1
             else:
                 offsets[(m["row"] - c["row"], m["col"] - c["col"])] += 1
@@ -64,7 +68,10 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--random", type=int, default=12)
     ap.add_argument("--seed", type=int, default=4)
+    ap.add_argument("--scale", type=float, default=1.0)
     args = ap.parse_args()
+    if not 0.05 <= args.scale <= 1.0:
+        sys.exit("photo_parts: --scale must lie in [0.05, 1]")
     photos, out = pathlib.Path(args.photos), pathlib.Path(args.out)
     if not photos.is_dir():
         sys.exit(f"photo_parts: {photos} not found")
@@ -92,8 +99,15 @@ def main():
         wholes = [detect(cli, whole_png) for cli in clis]
         for tag, box in boxes.items():
             path = out / f"{f.stem}_{tag}.png"
-            im.crop(box).save(path)
-            results = [outcome(detect(cli, path), whole, box[0], box[1]) for cli, whole in zip(clis, wholes)]
+            part = im.crop(box)
+            if args.scale != 1.0:
+                size = (round(part.width * args.scale), round(part.height * args.scale))
+                part = part.resize(size, Image.LANCZOS)
+            part.save(path)
+            results = [
+                outcome(detect(cli, path), whole, box[0], box[1], args.scale)
+                for cli, whole in zip(clis, wholes)
+            ]
             verdicts = [verdict(r) for r in results]
             for c, v in zip(counts, verdicts):
                 c[v] += 1

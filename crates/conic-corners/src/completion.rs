@@ -598,6 +598,41 @@ pub fn split_by_phase(
     before - boards.iter().map(|b| b.corners.len()).sum::<usize>()
 }
 
+/// Each corner's correlation with the junction of phase +1 in the frame of its labelled
+/// neighbours, times its label's parity: one sign all over a correctly labelled board. `None`
+/// where the junction cannot be measured.
+fn phase_ncc(image: &GrayImage, corners: &[Corner], board: &Board) -> Vec<Option<f64>> {
+    let grid = Grid::new(
+        &board.labels,
+        board.corners.iter().map(|&i| [corners[i].x, corners[i].y]),
+        0,
+    );
+    board
+        .labels
+        .iter()
+        .map(|&t| Some(labelled_junction(image, &grid, t)?.ncc * parity(t)))
+        .collect()
+}
+
+/// The phase of a board (`board.corners` index `corners`): whether its corners labelled with an
+/// even `row + col` correlate positively with the junction of phase +1 (the sign that
+/// [`split_by_phase`] checks), by a majority of the corners decided by at least
+/// [`PHASE_DECIDED`]. `None` when no corner is decided, or as many are of either sign.
+pub fn board_phase(image: &GrayImage, corners: &[Corner], board: &Board) -> Option<bool> {
+    if board.corners.iter().any(|&i| i >= corners.len()) {
+        return None;
+    }
+    let (p, n) = phase_ncc(image, corners, board)
+        .into_iter()
+        .flatten()
+        .filter(|n| n.abs() >= PHASE_DECIDED)
+        .fold(
+            (0, 0),
+            |(p, n), v| if v > 0.0 { (p + 1, n) } else { (p, n + 1) },
+        );
+    (p != n).then_some(p > n)
+}
+
 /// [`split_by_phase`] for one board: its pieces, largest first.
 fn split_board(
     image: &GrayImage,
@@ -608,18 +643,7 @@ fn split_board(
     if board.corners.iter().any(|&i| i >= corners.len()) {
         return vec![board];
     }
-    let grid = Grid::new(
-        &board.labels,
-        board.corners.iter().map(|&i| [corners[i].x, corners[i].y]),
-        0,
-    );
-    // Each corner's correlation with the junction of phase +1, times its label's parity:
-    // one sign all over a correctly labelled board.
-    let ncc: Vec<Option<f64>> = board
-        .labels
-        .iter()
-        .map(|&t| Some(labelled_junction(image, &grid, t)?.ncc * parity(t)))
-        .collect();
+    let ncc = phase_ncc(image, corners, &board);
     let sign: Vec<Option<bool>> = ncc
         .iter()
         .map(|n| n.filter(|n| n.abs() >= PHASE_DECIDED).map(|n| n > 0.0))

@@ -72,7 +72,9 @@
 //! and agreeing steps, or (where a bent board folds away from the camera and its lines turn
 //! sharply) when two neighbouring lines reach the other piece at their next site and span a
 //! parallelogram cell across the gap ([`merge_split_boards`]; `detect` runs it again after the
-//! completion has grown the pieces).
+//! completion has grown the pieces, and then also asks that the checker's phase continue across
+//! the gap). Two pieces are left apart when their lines disagree: when another label offset
+//! could merge them too, or has at least as many votes.
 //!
 //! **Canonical orientation.** Let `a` and `b` be the mean unit direction of the rays stepping
 //! `+1` along each of the two walk axes. The axis whose mean direction has the larger `|x|`
@@ -86,6 +88,7 @@
 
 use crate::election::Corner;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
+use std::cell::OnceCell;
 use std::collections::{HashMap, VecDeque};
 
 /// Tuning of [`connect`] (angles in radians).
@@ -547,7 +550,7 @@ pub fn label_with(corners: &[Corner], graph: &Graph, params: &LabelParams) -> Ve
             boards.push(canonical_board(corners, &members, &labels, &steps));
         }
     }
-    let mut boards = merge_split_boards(corners, boards);
+    let mut boards = merge_split_boards(corners, boards, |_| None);
     sort_boards(&mut boards);
     boards
 }
@@ -635,9 +638,18 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// cell the two links span across the gap is no more skewed than [`connect`] lets a supporting
 /// cell be (`max_cell_skew` of the default [`ConnectivityParams`]): a grid line turning sharply
 /// where a bent board folds away from the camera. A board is merged into another when at least
-/// [`MIN_BRIDGE_VOTES`] grid lines agree and no label would be taken twice; repeated until
-/// nothing changes.
-pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Board> {
+/// [`MIN_BRIDGE_VOTES`] grid lines agree, no label would be taken twice, the two boards'
+/// phases (`phase`, see [`crate::completion::board_phase`]; `None` where unknown) agree across
+/// the offset, and no other offset between the same two boards has [`MIN_BRIDGE_VOTES`] votes
+/// (counted from both boards) and either as many as this one or a merge of its own (no label
+/// taken twice, phases agreeing). The last guard is for a fold seen at a low resolution: its
+/// narrowest columns are missed, the lines from either side extrapolate across the gap with
+/// different steps, and they land one column apart. Repeated until nothing changes.
+pub fn merge_split_boards(
+    corners: &[Corner],
+    mut boards: Vec<Board>,
+    phase: impl Fn(&Board) -> Option<bool>,
+) -> Vec<Board> {
     const AXES: [(i32, i32); 4] = [(0, 1), (0, -1), (1, 0), (-1, 0)];
     let pos = |i: usize| (corners[i].x, corners[i].y);
     let max_skew = ConnectivityParams::default().max_cell_skew;
@@ -663,7 +675,7 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                     .map(move |(&i, &l)| (b, i, l))
             })
             .collect();
-        let mut merge: Option<(usize, usize, (i32, i32))> = None;
+        let mut tallies: Vec<HashMap<(usize, (i32, i32)), usize>> = Vec::new();
         for (a, board) in boards.iter().enumerate() {
             let mut votes: HashMap<(usize, (i32, i32)), usize> = HashMap::new();
             // Hits at the next site whose steps disagree: (board, offset, label, axis, i, j).
@@ -760,16 +772,57 @@ pub fn merge_split_boards(corners: &[Corner], mut boards: Vec<Board>) -> Vec<Boa
                     *votes.entry((h.0, h.1)).or_default() += 1;
                 }
             }
-            let mut ranked: Vec<_> = votes.into_iter().collect();
+            tallies.push(votes);
+        }
+        let phases: Vec<OnceCell<Option<bool>>> = boards.iter().map(|_| OnceCell::new()).collect();
+        let phase_of = |b: usize| *phases[b].get_or_init(|| phase(&boards[b]));
+        let mut merge: Option<(usize, usize, (i32, i32))> = None;
+        for (a, votes) in tallies.iter().enumerate() {
+            let free = |b: usize, off: (i32, i32)| {
+                boards[b]
+                    .labels
+                    .iter()
+                    .all(|l| !maps[a].contains_key(&(l.0 + off.0, l.1 + off.1)))
+            };
+            // The checker's phase continues across the gap.
+            let in_phase = |b: usize, off: (i32, i32)| {
+                let odd = (off.0 + off.1).rem_euclid(2) == 1;
+                match (phase_of(a), phase_of(b)) {
+                    (Some(pa), Some(pb)) => pa == (pb != odd),
+                    _ => true,
+                }
+            };
+            // Votes of the pieces `a` and `b`, from either side, per offset of `b` into `a`.
+            let pair = |b: usize| -> HashMap<(i32, i32), usize> {
+                let mut t: HashMap<(i32, i32), usize> = HashMap::new();
+                for (&(c, o), &n) in votes {
+                    if c == b {
+                        *t.entry(o).or_default() += n;
+                    }
+                }
+                for (&(c, o), &n) in &tallies[b] {
+                    if c == a {
+                        *t.entry((-o.0, -o.1)).or_default() += n;
+                    }
+                }
+                t
+            };
+            let mut ranked: Vec<_> = votes.iter().map(|(&k, &n)| (k, n)).collect();
             ranked.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
             merge = ranked
                 .into_iter()
                 .filter(|&(_, n)| n >= MIN_BRIDGE_VOTES)
                 .find(|&((b, off), _)| {
-                    boards[b]
-                        .labels
-                        .iter()
-                        .all(|l| !maps[a].contains_key(&(l.0 + off.0, l.1 + off.1)))
+                    // Where the lines disagree on how many steps the gap hides (a fold's narrow
+                    // columns, missed at a low resolution), neither placement is trusted.
+                    let t = pair(b);
+                    let pro = t.get(&off).copied().unwrap_or(0);
+                    let rival = t.iter().any(|(&o, &m)| {
+                        o != off
+                            && m >= MIN_BRIDGE_VOTES
+                            && (m >= pro || free(b, o) && in_phase(b, o))
+                    });
+                    free(b, off) && in_phase(b, off) && !rival
                 })
                 .map(|((b, off), _)| (a, b, off));
             if merge.is_some() {
@@ -1316,7 +1369,49 @@ mod tests {
                 cols: cols.len(),
             }
         };
-        let b = merge_split_boards(&c, vec![board(&[0, 1]), board(&[2, 4])]);
+        let b = merge_split_boards(&c, vec![board(&[0, 1]), board(&[2, 4])], |_| None);
+        assert_eq!(b.len(), 2);
+    }
+
+    #[test]
+    fn pieces_whose_lines_disagree_on_the_gap_merge_only_where_the_phase_decides() {
+        // Two pieces of 6 × 3 corners: the left one steps 20 px, the right one 24 px and starts
+        // 35 px beyond the left one's last column. Each left row reaches the right piece two
+        // steps on (a column hidden between them); each right row reaches the left piece two
+        // steps on too, which puts no column between them. Both placements fit.
+        let piece = |x0: f64, step: f64, first: usize| {
+            let corners: Vec<Corner> = (0..6)
+                .flat_map(|r| {
+                    (0..3).map(move |k| Corner {
+                        x: x0 + step * k as f64,
+                        y: 20.0 * r as f64,
+                        angles: [0.0, FRAC_PI_2],
+                        score: 1.0,
+                    })
+                })
+                .collect();
+            let board = Board {
+                corners: (first..first + 18).collect(),
+                labels: (0..6).flat_map(|r| (0..3).map(move |k| (r, k))).collect(),
+                rows: 6,
+                cols: 3,
+            };
+            (corners, board)
+        };
+        let (mut c, left) = piece(0.0, 20.0, 0);
+        let (right_corners, right) = piece(75.0, 24.0, 18);
+        c.extend(right_corners);
+        let b = merge_split_boards(&c, vec![left.clone(), right.clone()], |_| None);
+        assert_eq!(b.len(), 2, "merged although the lines disagree");
+        // Pieces of opposite phases: only adjacent columns keep the checker across the gap.
+        let b = merge_split_boards(&c, vec![left.clone(), right.clone()], |b| {
+            Some(b.corners[0] == 0)
+        });
+        assert_eq!(b.len(), 1);
+        let col = |i: usize| b[0].labels[b[0].corners.iter().position(|&j| j == i).unwrap()].1;
+        assert_eq!((col(2), col(18)), (2, 3));
+        // Pieces of one phase: a hidden column would keep it, but fewer lines say so.
+        let b = merge_split_boards(&c, vec![left, right], |_| Some(true));
         assert_eq!(b.len(), 2);
     }
 
@@ -1347,7 +1442,7 @@ mod tests {
         };
         let upper = piece(&|r, k| r <= 4 && k >= 1);
         let lower = piece(&|r, k| (r == 6 && k <= 2) || (r == 7 && k <= 1));
-        let b = merge_split_boards(&c, vec![upper, lower]);
+        let b = merge_split_boards(&c, vec![upper, lower], |_| None);
         assert_eq!(b.len(), 1);
         assert_eq!(b[0].corners.len(), 30);
         assert_exact(&b[0], &t, 0.1);

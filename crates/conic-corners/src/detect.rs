@@ -4,7 +4,9 @@
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
 use crate::board_fit::{fit_board_full, BoardFitParams, Path};
-use crate::completion::{complete_boards, edge_seen, split_by_phase, CompletionParams};
+use crate::completion::{
+    board_phase, complete_boards, edge_seen, split_by_phase, CompletionParams,
+};
 use crate::connectivity::{
     connect_seen, label_with, merge_split_boards, Board as LabelledBoard, ConnectivityParams,
     LabelParams,
@@ -279,7 +281,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     // Two pieces of a board that a pen or a finger split may line up across the gap along two
     // grid lines (what a merge needs) only once each has been completed up to it.
     let pieces = labelled.len();
-    labelled = merge_split_boards(&corners, labelled);
+    labelled = merge_split_boards(&corners, labelled, |b| board_phase(image, &corners, b));
     if labelled.len() < pieces {
         complete_boards(image, &mut corners, &mut labelled, &params.completion);
     }

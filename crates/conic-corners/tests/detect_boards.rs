@@ -505,6 +505,68 @@ fn parts_of_photos_split_by_an_occluder_or_a_fold_are_labelled_like_the_whole() 
     }
 }
 
+/// Parts of the S-shaped photos scaled down (a board seen from farther away), across the S's
+/// ridge: there the columns narrow to a third of the others' width and the rows drop by half a
+/// square per column, and at these scales the corners of the narrowest columns are missed.
+/// The pieces on either side then extrapolate their rows across the gap with their own steps,
+/// and land one column apart. Each board found must be labelled like the whole photo (two
+/// boards are acceptable, wrong labels are not).
+#[test]
+fn a_ridge_seen_from_afar_is_never_mislabelled() {
+    let Some(dir) = photos() else {
+        return;
+    };
+    // (photo, [x0, y0, width, height], scale)
+    let parts: [(&str, [u32; 4], f64); 4] = [
+        ("curve_5.jpg", [0, 295, 1280, 295], 0.25),
+        ("curve_5.jpg", [165, 312, 732, 268], 0.25),
+        ("curve_5.jpg", [137, 294, 940, 223], 0.35),
+        ("curve_4.jpg", [136, 706, 487, 419], 0.35),
+    ];
+    for (name, [x0, y0, cw, ch], scale) in parts {
+        let path = dir.join(name);
+        let whole = detect(&GrayImage::open(&path).unwrap(), &DetectParams::default());
+        assert_eq!(whole.boards.len(), 1, "{name}");
+        let (w, h) = (
+            (cw as f64 * scale).round() as u32,
+            (ch as f64 * scale).round() as u32,
+        );
+        let part = image::open(&path)
+            .unwrap()
+            .crop_imm(x0, y0, cw, ch)
+            .resize_exact(w, h, image::imageops::FilterType::Lanczos3);
+        let det = detect(
+            &GrayImage::from_dynamic(&part).unwrap(),
+            &DetectParams::default(),
+        );
+        assert!(!det.boards.is_empty(), "{name} {x0} {y0}");
+        for board in &det.boards {
+            let mut offsets: HashMap<(i32, i32), usize> = HashMap::new();
+            for c in &board.corners {
+                let x = (c.x + 0.5) / scale - 0.5 + x0 as f64;
+                let y = (c.y + 0.5) / scale - 0.5 + y0 as f64;
+                let m = whole.boards[0]
+                    .corners
+                    .iter()
+                    .min_by(|a, b| {
+                        (a.x - x)
+                            .hypot(a.y - y)
+                            .total_cmp(&(b.x - x).hypot(b.y - y))
+                    })
+                    .unwrap();
+                if (m.x - x).hypot(m.y - y) < 3.0 / scale {
+                    *offsets.entry((m.row - c.row, m.col - c.col)).or_default() += 1;
+                }
+            }
+            eprintln!(
+                "{name} {x0} {y0} ×{scale}: {} corners, {offsets:?}",
+                board.corners.len()
+            );
+            assert_eq!(offsets.len(), 1, "{name} {x0} {y0} ×{scale}: {offsets:?}");
+        }
+    }
+}
+
 /// A print's dot gain joins the dark squares by a bridge at every junction: 0.2 mm a side on
 /// squares of 90–110 px is a bridge of about 2 px. Every junction fails the fine election's
 /// centre test, so before the coarse-only fallback nothing was found; now the board is found
