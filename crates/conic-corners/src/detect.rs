@@ -397,8 +397,9 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         let start = Corner { x, y, ..corners[i] };
                         let again = refine_corner(image, &start, row, col, reach, &params.refine);
                         (again.status == Status::Converged
-                            && (again.x - x).hypot(again.y - y) <= params.board_fit.max_shift)
-                            .then_some(again)
+                            && (again.x - x).hypot(again.y - y) <= params.board_fit.max_shift
+                            && nearest_is_own(&corners, b, i, [again.x, again.y]))
+                        .then_some(again)
                     });
                     local = confirmed.unwrap_or(local);
                 }
@@ -639,6 +640,16 @@ fn neighbour_reach(corners: &[Corner], neighbours: &[Option<usize>; 4], i: usize
         .flatten()
         .map(|&j| (corners[j].x - c.x).hypot(corners[j].y - c.y))
         .max_by(f64::total_cmp)
+}
+
+/// Whether `q` (image coordinates) lies nearer the pixel-level position of `corners[i]` than of
+/// any other corner of `board`. Where a column is missed (the narrowest columns of an S's ridge
+/// seen from afar) the board's curves can meet at the neighbouring corner's junction, a step
+/// away, and the refiner started there confirms it: that answer is the neighbour's.
+fn nearest_is_own(corners: &[Corner], board: &LabelledBoard, i: usize, q: [f64; 2]) -> bool {
+    let d = |j: usize| (corners[j].x - q[0]).hypot(corners[j].y - q[1]);
+    let own = d(i);
+    board.corners.iter().all(|&j| j == i || d(j) > own)
 }
 
 /// [`neighbour_reach`] for a corner added by grid completion (it has no graph links): the
