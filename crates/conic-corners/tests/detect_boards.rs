@@ -7,7 +7,7 @@
 //! a truth corner, the labels of each board are the truth labels up to one lattice symmetry and a
 //! shift (so truth neighbours differ by ±1 on one axis), and the refined positions' RMS error.
 
-use conic_corners::detect::{detect, DetectParams, Detection};
+use conic_corners::detect::{detect, Board, DetectParams, DetectedCorner, Detection};
 use conic_corners::prefilter::box_downsample;
 use conic_corners::refine::Status;
 use conic_corners::synth::board::{
@@ -415,6 +415,31 @@ fn real_photos_when_present() {
     }
 }
 
+/// The label offsets (whole minus part, with their counts) of a board found in a part of a
+/// photo against the whole photo's board: each corner of `part`, mapped into the photo's pixels
+/// by `to_photo`, is matched to the nearest corner of `whole` if that lies within `tolerance` px.
+fn label_offsets(
+    whole: &Board,
+    part: &Board,
+    to_photo: impl Fn(f64, f64) -> (f64, f64),
+    tolerance: f64,
+) -> HashMap<(i32, i32), usize> {
+    let mut offsets = HashMap::new();
+    for c in &part.corners {
+        let (x, y) = to_photo(c.x, c.y);
+        let d = |m: &&DetectedCorner| (m.x - x).hypot(m.y - y);
+        let m = whole
+            .corners
+            .iter()
+            .min_by(|a, b| d(a).total_cmp(&d(b)))
+            .unwrap();
+        if d(&m) < tolerance {
+            *offsets.entry((m.row - c.row, m.col - c.col)).or_default() += 1;
+        }
+    }
+    offsets
+}
+
 /// Half of a photo: one board whose labels are the whole photo's up to one translation. Without
 /// the rest of the board the pieces on either side of an occluder or a fold meet only there:
 /// - `marker_real3.jpg`'s top half: a finger hides two corners of row 1, and the pieces meet
@@ -476,22 +501,12 @@ fn parts_of_photos_split_by_an_occluder_or_a_fold_are_labelled_like_the_whole() 
                 continue;
             }
             assert_eq!(det.boards.len(), 1, "{name} {half}");
-            let mut offsets: HashMap<(i32, i32), usize> = HashMap::new();
-            for c in &det.boards[0].corners {
-                let (x, y) = (c.x + x0 as f64, c.y + y0 as f64);
-                let m = whole.boards[0]
-                    .corners
-                    .iter()
-                    .min_by(|a, b| {
-                        (a.x - x)
-                            .hypot(a.y - y)
-                            .total_cmp(&(b.x - x).hypot(b.y - y))
-                    })
-                    .unwrap();
-                if (m.x - x).hypot(m.y - y) < 3.0 {
-                    *offsets.entry((m.row - c.row, m.col - c.col)).or_default() += 1;
-                }
-            }
+            let offsets = label_offsets(
+                &whole.boards[0],
+                &det.boards[0],
+                |x, y| (x + x0 as f64, y + y0 as f64),
+                3.0,
+            );
             let n = det.boards[0].corners.len();
             assert_eq!(offsets.len(), 1, "{name} {half}: {offsets:?}");
             // A few crop corners have no counterpart: the whole photo misses (1, 7) of
@@ -544,23 +559,13 @@ fn a_ridge_seen_from_afar_is_never_mislabelled() {
         );
         assert!(!det.boards.is_empty(), "{name} {x0} {y0}");
         for board in &det.boards {
-            let mut offsets: HashMap<(i32, i32), usize> = HashMap::new();
-            for c in &board.corners {
-                let x = (c.x + 0.5) / scale - 0.5 + x0 as f64;
-                let y = (c.y + 0.5) / scale - 0.5 + y0 as f64;
-                let m = whole.boards[0]
-                    .corners
-                    .iter()
-                    .min_by(|a, b| {
-                        (a.x - x)
-                            .hypot(a.y - y)
-                            .total_cmp(&(b.x - x).hypot(b.y - y))
-                    })
-                    .unwrap();
-                if (m.x - x).hypot(m.y - y) < 3.0 / scale {
-                    *offsets.entry((m.row - c.row, m.col - c.col)).or_default() += 1;
-                }
-            }
+            let to_photo = |x: f64, y: f64| {
+                (
+                    (x + 0.5) / scale - 0.5 + x0 as f64,
+                    (y + 0.5) / scale - 0.5 + y0 as f64,
+                )
+            };
+            let offsets = label_offsets(&whole.boards[0], board, to_photo, 3.0 / scale);
             eprintln!(
                 "{name} {x0} {y0} ×{scale}: {} corners, {offsets:?}",
                 board.corners.len()
