@@ -9,7 +9,8 @@ survive. Each photo is converted to grey (Pillow's `L`) and written as PNG (the 
 JPEG) in OUT/:
   _s2, _s4            1/2 and 1/4 size (Lanczos)
   _x0.66, _x0.4, _x0.3 0.66, 0.4 and 0.3 size (Lanczos)
-  _r30, _r90          half size rotated by 30 degrees (bicubic, grey 128 outside) and 90
+  _r30, _r45          half size rotated by 30 and 45 degrees (bicubic, grey 128 outside)
+  _r90, _r180         half size rotated by 90 and 180 degrees (exact)
   _b2                 half size, Gaussian blur of radius 2
   _q15                half size, JPEG quality 15
   _lowc               half size, contrast x 0.3 (Pillow's ImageEnhance)
@@ -59,8 +60,10 @@ def make(photos, out):
             im.resize(size, Image.LANCZOS).save(out / f"{n}_x{s}.png")
             names.append(f"{n}_x{s}.png")
         half = im.resize((im.width // 2, im.height // 2), Image.LANCZOS)
-        half.rotate(30, expand=True, fillcolor=128, resample=Image.BICUBIC).save(out / f"{n}_r30.png")
+        for angle in (30, 45):
+            half.rotate(angle, expand=True, fillcolor=128, resample=Image.BICUBIC).save(out / f"{n}_r{angle}.png")
         half.transpose(Image.ROTATE_90).save(out / f"{n}_r90.png")
+        half.transpose(Image.ROTATE_180).save(out / f"{n}_r180.png")
         half.filter(ImageFilter.GaussianBlur(2)).save(out / f"{n}_b2.png")
         half.save(out / f"{n}_q15.jpg", quality=15)
         ImageEnhance.Contrast(half).enhance(0.3).save(out / f"{n}_lowc.png")
@@ -70,7 +73,7 @@ def make(photos, out):
         Image.fromarray((255 * (a / 255.0) ** 2.2).astype("uint8")).save(out / f"{n}_gamma.png")
         for tag, length, dy in (("motion", 9, 0), ("m3", 3, 0), ("m5", 5, 0), ("d3", 3, 1), ("d5", 5, 1)):
             Image.fromarray(box(a, length, dy).astype("uint8")).save(out / f"{n}_{tag}.png")
-        names += [f"{n}_{t}" for t in ("r30.png", "r90.png", "b2.png", "q15.jpg", "lowc.png",
+        names += [f"{n}_{t}" for t in ("r30.png", "r45.png", "r90.png", "r180.png", "b2.png", "q15.jpg", "lowc.png",
                                         "noise.png", "gamma.png", "motion.png", "m3.png",
                                         "m5.png", "d3.png", "d5.png")]
     for name, (photo, b) in CROPS.items():
