@@ -73,7 +73,8 @@
 //! sharply) when two neighbouring lines reach the other piece at their next site and span a
 //! parallelogram cell across the gap ([`merge_split_boards`]; `detect` runs it again after the
 //! completion has grown the pieces, and then also asks that the checker's phase continue across
-//! the gap). Two pieces are left apart when their lines disagree: when another label offset
+//! the gap; pieces whose canonical orientations differ by a quarter turn, as on a board at 45°,
+//! are turned into one frame first). Two pieces are left apart when their lines disagree: when another label offset
 //! could merge them too, or has at least as many votes.
 //!
 //! **Canonical orientation.** Let `a` and `b` be the mean unit direction of the rays stepping
@@ -715,8 +716,10 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// the extrapolated step (within 30 % of the step), it votes for merging that board with the label
 /// offset that puts the hit corner `k` steps further. Where the hit corner has no step of its own
 /// along that axis (a completed row beyond a pen), its step along the other axis must agree with
-/// the extrapolating corner's instead. Both boards are in canonical orientation, so pieces of
-/// one board differ by a pure translation of labels. A hit at the next site (`k = 1`)
+/// the extrapolating corner's instead. Pieces of one board differ by a translation of labels
+/// once in one orientation: each board is first turned by the quarter turns that best align its
+/// label steps with the largest board's (canonical orientations may differ on a board at 45°),
+/// and turned back at the end. A hit at the next site (`k = 1`)
 /// whose steps disagree, or up to [`TURN_REACH`] steps from the prediction, still votes when the
 /// far piece's steps there are within [`TURN_STEP_RATIO`] of the extrapolated one, the
 /// neighbouring grid line also hits the same board at its next site with the same offset, and the
