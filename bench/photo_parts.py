@@ -11,10 +11,11 @@ Pillow's `L`), the parts are its four halves, its four quarters and N random win
 board seen from farther away. CLI runs `detect` on the whole photo and on every part. A part's
 board corner within 3 of the part's pixels of a corner of the whole photo's board (mapped into
 the photo's pixels, pixel centres at integers: `x = (x_part + 0.5) / F - 0.5 + left`) gives a
-label offset (whole minus part); a board whose corners give more than one offset is mislabelled. A part that
-gives more than one board is split (two boards of one photo are never right: each photo shows
-one board). A part that gives no board is listed too (some show no board at all, or a single
-column of it). With a baseline CLI, the parts whose outcome differs are marked. Exit status 0.
+label offset (whole minus part); a board whose corners give more than one offset is
+mislabelled. A part that gives more than one board is split (two boards of one photo are never
+right: each photo shows one board). A part that gives no board is listed too (some show no
+board at all, or a single column of it). With a baseline CLI, the parts whose outcome differs
+are marked. Exit status 0.
 """
 import argparse
 import collections

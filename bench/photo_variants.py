@@ -61,7 +61,8 @@ def make(photos, out):
             names.append(f"{n}_x{s}.png")
         half = im.resize((im.width // 2, im.height // 2), Image.LANCZOS)
         for angle in (30, 45):
-            half.rotate(angle, expand=True, fillcolor=128, resample=Image.BICUBIC).save(out / f"{n}_r{angle}.png")
+            turned = half.rotate(angle, expand=True, fillcolor=128, resample=Image.BICUBIC)
+            turned.save(out / f"{n}_r{angle}.png")
         half.transpose(Image.ROTATE_90).save(out / f"{n}_r90.png")
         half.transpose(Image.ROTATE_180).save(out / f"{n}_r180.png")
         half.filter(ImageFilter.GaussianBlur(2)).save(out / f"{n}_b2.png")
@@ -73,9 +74,9 @@ def make(photos, out):
         Image.fromarray((255 * (a / 255.0) ** 2.2).astype("uint8")).save(out / f"{n}_gamma.png")
         for tag, length, dy in (("motion", 9, 0), ("m3", 3, 0), ("m5", 5, 0), ("d3", 3, 1), ("d5", 5, 1)):
             Image.fromarray(box(a, length, dy).astype("uint8")).save(out / f"{n}_{tag}.png")
-        names += [f"{n}_{t}" for t in ("r30.png", "r45.png", "r90.png", "r180.png", "b2.png", "q15.jpg", "lowc.png",
-                                        "noise.png", "gamma.png", "motion.png", "m3.png",
-                                        "m5.png", "d3.png", "d5.png")]
+        names += [f"{n}_{t}" for t in ("r30.png", "r45.png", "r90.png", "r180.png", "b2.png",
+                                        "q15.jpg", "lowc.png", "noise.png", "gamma.png",
+                                        "motion.png", "m3.png", "m5.png", "d3.png", "d5.png")]
     for name, (photo, b) in CROPS.items():
         if (photos / photo).exists():
             Image.open(photos / photo).crop(b).save(out / f"{name}.png")

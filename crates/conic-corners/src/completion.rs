@@ -101,7 +101,7 @@
 //! region beyond one ring is reached only over several rounds; a junction whose quadrant is
 //! covered by an occluder of the same grey as that quadrant passes (a) but usually not (b).
 
-use crate::connectivity::{line_diff, Board, ConnectivityParams};
+use crate::connectivity::{board_from, line_diff, Board, ConnectivityParams};
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
@@ -1187,19 +1187,12 @@ fn range(labels: &[Label]) -> (i32, i32, i32, i32) {
 
 /// Shifts labels to a minimum of 0, sorts by `(row, col)` and sets `rows`, `cols`.
 fn canonicalize(board: &mut Board) {
-    let r0 = board.labels.iter().map(|l| l.0).min().unwrap_or(0);
-    let c0 = board.labels.iter().map(|l| l.1).min().unwrap_or(0);
-    let mut pairs: Vec<(Label, usize)> = board
+    let pairs = board
         .labels
         .iter()
-        .zip(&board.corners)
-        .map(|(&(r, c), &i)| ((r - r0, c - c0), i))
-        .collect();
-    pairs.sort_unstable();
-    board.labels = pairs.iter().map(|p| p.0).collect();
-    board.corners = pairs.iter().map(|p| p.1).collect();
-    board.rows = board.labels.iter().map(|l| l.0 + 1).max().unwrap_or(0) as usize;
-    board.cols = board.labels.iter().map(|l| l.1 + 1).max().unwrap_or(0) as usize;
+        .copied()
+        .zip(board.corners.iter().copied());
+    *board = board_from(pairs.collect());
 }
 
 #[cfg(test)]

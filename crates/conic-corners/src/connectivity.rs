@@ -74,8 +74,8 @@
 //! parallelogram cell across the gap ([`merge_split_boards`]; `detect` runs it again after the
 //! completion has grown the pieces, and then also asks that the checker's phase continue across
 //! the gap; pieces whose canonical orientations differ by a quarter turn, as on a board at 45°,
-//! are turned into one frame first). Two pieces are left apart when their lines disagree: when another label offset
-//! could merge them too, or has at least as many votes.
+//! are turned into one frame first). Two pieces are left apart when their lines disagree: when
+//! another label offset could merge them too, or has at least as many votes.
 //!
 //! **Canonical orientation.** Let `a` and `b` be the mean unit direction of the rays stepping
 //! `+1` along each of the two walk axes. The axis whose mean direction has the larger `|x|`
@@ -579,15 +579,9 @@ fn quarter_turn(l: (i32, i32), t: usize) -> (i32, i32) {
     }
 }
 
-/// `board` with every label turned by `t` quarter turns ([`quarter_turn`]), shifted so that the
-/// smallest row and column are 0 and sorted by label.
-fn turned(board: &Board, t: usize) -> Board {
-    let mut all: Vec<((i32, i32), usize)> = board
-        .labels
-        .iter()
-        .zip(&board.corners)
-        .map(|(&l, &i)| (quarter_turn(l, t), i))
-        .collect();
+/// The board of `(label, corner)` pairs: labels shifted so that the smallest row and column are
+/// 0, sorted by label.
+pub(crate) fn board_from(mut all: Vec<((i32, i32), usize)>) -> Board {
     let r0 = all.iter().map(|x| x.0 .0).min().unwrap_or(0);
     let c0 = all.iter().map(|x| x.0 .1).min().unwrap_or(0);
     for x in all.iter_mut() {
@@ -600,6 +594,18 @@ fn turned(board: &Board, t: usize) -> Board {
         rows: all.iter().map(|x| x.0 .0 + 1).max().unwrap_or(0) as usize,
         cols: all.iter().map(|x| x.0 .1 + 1).max().unwrap_or(0) as usize,
     }
+}
+
+/// `board` with every label turned by `t` quarter turns ([`quarter_turn`]) ([`board_from`]).
+fn turned(board: &Board, t: usize) -> Board {
+    board_from(
+        board
+            .labels
+            .iter()
+            .zip(&board.corners)
+            .map(|(&l, &i)| (quarter_turn(l, t), i))
+            .collect(),
+    )
 }
 
 /// The mean unit image directions of a board's `+col` and `+row` label steps (from the positions
@@ -759,11 +765,9 @@ pub fn merge_split_boards(
         })
         .collect();
     loop {
-        let mut order: Vec<usize> = (0..boards.len()).collect();
-        order.sort_by(|&x, &y| board_order(&boards[x], &boards[y]));
-        let mut taken: Vec<Option<Board>> = boards.into_iter().map(Some).collect();
-        boards = order.iter().map(|&k| taken[k].take().unwrap()).collect();
-        turns = order.iter().map(|&k| turns[k]).collect();
+        let mut paired: Vec<(Board, usize)> = boards.into_iter().zip(turns).collect();
+        paired.sort_by(|x, y| board_order(&x.0, &y.0));
+        (boards, turns) = paired.into_iter().unzip();
         let maps: Vec<HashMap<(i32, i32), usize>> = boards
             .iter()
             .map(|b| {
@@ -948,32 +952,15 @@ pub fn merge_split_boards(
         let piece = boards.swap_remove(b);
         turns.swap_remove(b);
         let a = if a == boards.len() { b } else { a };
-        let mut all: Vec<(i32, i32, usize)> = boards[a]
+        let own = boards[a]
             .labels
             .iter()
-            .zip(&boards[a].corners)
-            .map(|(l, &i)| (l.0, l.1, i))
-            .chain(
-                piece
-                    .labels
-                    .iter()
-                    .zip(&piece.corners)
-                    .map(|(l, &i)| (l.0 + off.0, l.1 + off.1, i)),
-            )
-            .collect();
-        let r0 = all.iter().map(|t| t.0).min().unwrap_or(0);
-        let c0 = all.iter().map(|t| t.1).min().unwrap_or(0);
-        for t in all.iter_mut() {
-            t.0 -= r0;
-            t.1 -= c0;
-        }
-        all.sort_unstable();
-        boards[a] = Board {
-            corners: all.iter().map(|t| t.2).collect(),
-            labels: all.iter().map(|t| (t.0, t.1)).collect(),
-            rows: all.iter().map(|t| t.0 + 1).max().unwrap_or(0) as usize,
-            cols: all.iter().map(|t| t.1 + 1).max().unwrap_or(0) as usize,
-        };
+            .copied()
+            .zip(boards[a].corners.iter().copied());
+        let moved = (piece.labels.iter())
+            .zip(&piece.corners)
+            .map(|(l, &i)| ((l.0 + off.0, l.1 + off.1), i));
+        boards[a] = board_from(own.chain(moved).collect());
     }
 }
 
@@ -1017,29 +1004,16 @@ fn canonical_board(
     let (col_dir, row_dir) = if col_is_a { (a, b) } else { (b, a) };
     let col_sign = if col_dir.0 < 0.0 { -1 } else { 1 };
     let row_sign = if row_dir.1 < 0.0 { -1 } else { 1 };
-    let mut out: Vec<(i32, i32, usize)> = members
-        .iter()
-        .map(|&i| {
-            let (r, c) = labels[i];
-            let (along_col, along_row) = if col_is_a { (c, r) } else { (r, c) };
-            (row_sign * along_row, col_sign * along_col, i)
-        })
-        .collect();
-    let r0 = out.iter().map(|t| t.0).min().unwrap_or(0);
-    let c0 = out.iter().map(|t| t.1).min().unwrap_or(0);
-    for t in out.iter_mut() {
-        t.0 -= r0;
-        t.1 -= c0;
-    }
-    out.sort_unstable();
-    let rows = out.iter().map(|t| t.0 + 1).max().unwrap_or(0) as usize;
-    let cols = out.iter().map(|t| t.1 + 1).max().unwrap_or(0) as usize;
-    Board {
-        corners: out.iter().map(|t| t.2).collect(),
-        labels: out.iter().map(|t| (t.0, t.1)).collect(),
-        rows,
-        cols,
-    }
+    board_from(
+        members
+            .iter()
+            .map(|&i| {
+                let (r, c) = labels[i];
+                let (along_col, along_row) = if col_is_a { (c, r) } else { (r, c) };
+                ((row_sign * along_row, col_sign * along_col), i)
+            })
+            .collect(),
+    )
 }
 
 #[cfg(test)]
