@@ -46,11 +46,16 @@
 //!    between two labelled corners of one line also gets their midpoint. Predictions farther than
 //!    `agreement` grid steps from their coordinate-wise median are dropped; at least two must
 //!    remain and their mean is the prediction `p̂`.
-//! 3. **Verification** in the local grid frame `p + a·u + b·v` (`u`, `v`: the steps of the nearest
-//!    labelled column and row pairs), sampled on 84 points with `0.06 ≤ |a|, |b|` and
-//!    `|a| + |b| ≤ 0.42` (away from the edges, which blur, and from the cell centres, where
-//!    HydraMarker dots sit). At a site on the board's boundary (its row or column the first or
-//!    last), where the squares beyond may be slivers foreshortened at a silhouette, a failed
+//! 3. **Verification** in the local grid frame `p + a·u + b·v`, sampled on 84 points with
+//!    `0.06 ≤ |a|, |b|` and `|a| + |b| ≤ 0.42` (away from the edges, which blur, and from the
+//!    cell centres, where HydraMarker dots sit). `u` and `v` are the column and row steps on
+//!    the sample's side of `t` (`a ≥ 0` or `a < 0`, `b ≥ 0` or `b < 0`): each the mean step of
+//!    the labelled pairs along that axis whose midpoints lie on that side and nearest to `t`
+//!    (Euclidean distance in labels; a side without pairs takes the other side's step). So the
+//!    frame follows a board's bending on either side of the site, and it depends only on which
+//!    corners are labelled, not on which way the labels run: a photo turned by 90° or 180° gets
+//!    the same frames. At a site on the board's boundary (its row or column the first or last),
+//!    where the squares beyond may be slivers foreshortened at a silhouette, a failed
 //!    verification is retried with the outer side of the frame scaled by 0.5, then 0.25, from
 //!    the start of highest quick contrast on a ±0.2-step grid; such a corner must also be
 //!    confirmed within 1.5 px by the edge walks of (c) started from it, or by the junction model
@@ -215,8 +220,9 @@ fn ncc(sum: f64, sum_sq: f64, signed: f64, n: f64) -> f64 {
 }
 
 /// The local grid frame of a junction: a sample `(a, b)` lies at `p + a·u + b·v`, with the `u`
-/// of its side of the junction (`u[0]` for `a ≥ 0`, `u[1]` for `a < 0`) and likewise `v`. The
-/// sides differ only where a board's outer squares are foreshortened to slivers at a silhouette.
+/// of its side of the junction (`u[0]` for `a ≥ 0`, `u[1]` for `a < 0`) and likewise `v`: the
+/// steps of the board on either side ([`Grid::frame`]), and at a silhouette the outer side
+/// narrowed to a sliver.
 #[derive(Clone, Copy, Debug)]
 struct Frame {
     u: [P; 2],
@@ -224,10 +230,10 @@ struct Frame {
 }
 
 impl Frame {
-    fn symmetric(u: P, v: P) -> Self {
+    fn scaled(&self, s: f64) -> Self {
         Self {
-            u: [u, u],
-            v: [v, v],
+            u: self.u.map(|u| scale(u, s)),
+            v: self.v.map(|v| scale(v, s)),
         }
     }
 
@@ -360,28 +366,52 @@ impl Grid {
         }
     }
 
-    /// The step of the labelled pair along `e` nearest to `t` (`t + k` and `t + k + e`).
-    fn local_step(&self, t: Label, e: Label) -> Option<P> {
-        let mut best: Option<(i32, P)> = None;
-        for dr in -2..=2 {
-            for dc in -2..=2 {
-                let a = (t.0 + dr, t.1 + dc);
-                let b = (a.0 + e.0, a.1 + e.1);
-                let cost = (2 * dr + e.0).abs() + (2 * dc + e.1).abs();
-                if best.is_some_and(|(c, _)| c <= cost) {
+    /// The step `p(b) − p(a)` of the labelled pairs `a`, `b = a + e` nearest to `t` whose
+    /// midpoint lies on the given side of `t` along `e` (`side` +1 or −1), averaged over the
+    /// pairs equally near: no pair is preferred for the order of its labels, so the frame does
+    /// not depend on which way the labels run.
+    fn side_step(&self, t: Label, e: Label, side: i32) -> Option<P> {
+        let mut best: Option<(i32, P, f64)> = None;
+        // Midpoints up to 2.5 steps along `e` on either side, and 2 across.
+        let alongs = if side > 0 { 0..=2 } else { -3..=-1 };
+        for along in alongs {
+            for across in -2..=2 {
+                let (dr, dc) = if e.0 != 0 {
+                    (along, across)
+                } else {
+                    (across, along)
+                };
+                let cost = (2 * dr + e.0).pow(2) + (2 * dc + e.1).pow(2);
+                if best.is_some_and(|(c, _, _)| c < cost) {
                     continue;
                 }
-                if let (Some(pa), Some(pb)) = (self.get(a), self.get(b)) {
-                    best = Some((cost, sub(pb, pa)));
+                let a = (t.0 + dr, t.1 + dc);
+                if let (Some(pa), Some(pb)) = (self.get(a), self.get((a.0 + e.0, a.1 + e.1))) {
+                    best = Some(match best {
+                        Some((c, sum, n)) if c == cost => (c, add(sum, sub(pb, pa)), n + 1.0),
+                        _ => (cost, sub(pb, pa), 1.0),
+                    });
                 }
             }
         }
-        best.map(|(_, s)| s)
+        best.map(|(_, sum, n)| scale(sum, 1.0 / n))
     }
 
-    /// The frame `(u, v)`: column and row steps near `t`.
-    fn frame(&self, t: Label) -> Option<(P, P)> {
-        Some((self.local_step(t, (0, 1))?, self.local_step(t, (1, 0))?))
+    /// The frame of `t` from the nearest labelled pairs on each side of it (a side without
+    /// pairs takes the other's step), and its mean column and row steps `(u, v)`. On a bent
+    /// board the two sides' steps turn and shrink with the edges, which a junction's samples
+    /// then follow.
+    fn frame(&self, t: Label) -> Option<(Frame, P, P)> {
+        let sides = |e: Label| -> Option<[P; 2]> {
+            match (self.side_step(t, e, 1), self.side_step(t, e, -1)) {
+                (Some(a), Some(b)) => Some([a, b]),
+                (Some(a), None) | (None, Some(a)) => Some([a, a]),
+                (None, None) => None,
+            }
+        };
+        let (u, v) = (sides((0, 1))?, sides((1, 0))?);
+        let mean = |s: [P; 2]| scale(add(s[0], s[1]), 0.5);
+        Some((Frame { u, v }, mean(u), mean(v)))
     }
 
     /// Every prediction of `t` (rule step 2), pushed to `out`.
@@ -458,23 +488,18 @@ fn parity((r, c): Label) -> f64 {
 
 /// The [`junction`] at the labelled corner `t`, in the frame of its labelled neighbours' steps.
 fn labelled_junction(image: &GrayImage, grid: &Grid, t: Label) -> Option<Junction> {
-    let (p, (u, v)) = (grid.get(t)?, grid.frame(t)?);
-    junction(image, p, &Frame::symmetric(u, v))
+    let (p, (frame, _, _)) = (grid.get(t)?, grid.frame(t)?);
+    junction(image, p, &frame)
 }
 
-/// Corners measured for the board's [`Reference`] (evenly spread over its label order).
-const REFERENCE_CORNERS: usize = 32;
-
-/// The board's phase (majority) and median contrast, from at most [`REFERENCE_CORNERS`] of its
-/// corners.
+/// The board's phase (majority) and median contrast, measured at every labelled corner: a
+/// subset taken in label order would depend on which way the labels run, and so on how the
+/// board lies in the image.
 fn reference(image: &GrayImage, grid: &Grid, labels: &[Label]) -> Option<Reference> {
-    let stride = labels.len().div_ceil(REFERENCE_CORNERS).max(1);
-    let mut measured = Vec::with_capacity(REFERENCE_CORNERS);
-    for &t in labels.iter().step_by(stride) {
-        if let Some(j) = labelled_junction(image, grid, t) {
-            measured.push((t, j));
-        }
-    }
+    let measured: Vec<(Label, Junction)> = labels
+        .iter()
+        .filter_map(|&t| Some((t, labelled_junction(image, grid, t)?)))
+        .collect();
     let votes: f64 = measured
         .iter()
         .map(|(t, j)| j.ncc.signum() * parity(*t))
@@ -888,7 +913,7 @@ fn complete_one(
     for _ in 0..params.rounds {
         let (r0, r1, c0, c1) = range(&boards[b].labels);
         // The sites to check this round, with their consensus prediction, grid frame and step.
-        let mut sites: Vec<(Label, P, P, P, f64)> = Vec::new();
+        let mut sites: Vec<(Label, P, Frame, P, P, f64)> = Vec::new();
         for r in r0 - 1..=r1 + 1 {
             for c in c0 - 1..=c1 + 1 {
                 let t = (r, c);
@@ -900,12 +925,12 @@ fn complete_one(
                     continue;
                 }
                 tried.insert(t, preds.len());
-                let Some((u, v)) = grid.frame(t) else {
+                let Some((frame, u, v)) = grid.frame(t) else {
                     continue;
                 };
                 let step = 0.5 * (norm(u) + norm(v));
                 if let Some(p) = consensus(&mut preds, params.agreement * step) {
-                    sites.push((t, p, u, v, step));
+                    sites.push((t, p, frame, u, v, step));
                 }
             }
         }
@@ -922,7 +947,7 @@ fn complete_one(
         // image and the grid as it stood at the start of the round, never another site's answer.
         let checked: Vec<Option<(Label, Corner, f64)>> = sites
             .par_iter()
-            .map(|&(t, p, u, v, step)| {
+            .map(|&(t, p, frame, u, v, step)| {
                 let phase = reference.phase * parity(t);
                 // A site on the board's boundary may have slivers beyond it (squares
                 // foreshortened at a silhouette): its outer side is sampled in a narrower frame
@@ -931,15 +956,15 @@ fn complete_one(
                 let outer = |k: i32, lo: i32, hi: i32| [k >= hi, k <= lo];
                 let (outer_u, outer_v) = (outer(t.1, c0, c1), outer(t.0, r0, r1));
                 let sliver = |s: f64| Frame {
-                    u: [0, 1].map(|i| if outer_u[i] { scale(u, s) } else { u }),
-                    v: [0, 1].map(|i| if outer_v[i] { scale(v, s) } else { v }),
+                    u: [0, 1].map(|i| scale(frame.u[i], if outer_u[i] { s } else { 1.0 })),
+                    v: [0, 1].map(|i| scale(frame.v[i], if outer_v[i] { s } else { 1.0 })),
                 };
                 let on_boundary = outer_u.iter().chain(&outer_v).any(|&o| o);
                 let verified = verify(
                     image,
                     p,
                     (u, v),
-                    &Frame::symmetric(u, v),
+                    &frame,
                     STARTS.into_iter(),
                     0.0,
                     phase,
@@ -951,15 +976,14 @@ fn complete_one(
                     // A site near the image's border whose full frame leaves the image: the
                     // whole frame is narrowed instead (a board cut by the border, whose corners
                     // there the election's template cannot reach either).
-                    let full = Frame::symmetric(u, v);
-                    (junction(image, p, &full).is_none())
+                    (junction(image, p, &frame).is_none())
                         .then(|| {
                             SLIVER_SCALES.iter().find_map(|&s| {
                                 verify(
                                     image,
                                     p,
                                     (u, v),
-                                    &Frame::symmetric(scale(u, s), scale(v, s)),
+                                    &frame.scaled(s),
                                     STARTS.into_iter(),
                                     0.0,
                                     phase,
@@ -976,7 +1000,7 @@ fn complete_one(
                     // patch, verified an X-junction there if it elected a corner at the
                     // prediction with its edges along the grid. No board took that corner, as
                     // its grid cells leave the image.
-                    (junction(image, p, &Frame::symmetric(u, v)).is_none())
+                    (junction(image, p, &frame).is_none())
                         .then(|| elected_at(&free, p, (u, v), params.agreement * step))?
                         .map(|(q, score)| (q, score, true))
                 })
@@ -1635,6 +1659,47 @@ mod tests {
         assert_eq!(boards.len(), 1);
         assert!(!boards[0].labels.contains(&(4, 5)));
         assert_eq!(boards[0].corners.len(), whole.corners.len() - 2);
+    }
+
+    proptest::proptest! {
+        /// The frame of a site does not depend on which way the labels run: the same corners
+        /// labelled backwards along both axes, or with rows and columns swapped, give the same
+        /// frame, its sides exchanged and its steps turned accordingly.
+        #[test]
+        fn a_frame_does_not_depend_on_the_labels_order(
+            bend in -0.6f64..0.6,
+            shear in -0.3f64..0.3,
+            holes in proptest::collection::vec(proptest::bool::weighted(0.3), 49),
+            site in (0i32..7, 0i32..7),
+        ) {
+            let n = 7;
+            let position = |(r, c): Label| -> P {
+                let (r, c) = (r as f64, c as f64);
+                [30.0 * c + bend * c * c + shear * 30.0 * r, 30.0 * r - bend * r * c]
+            };
+            let kept: Vec<Label> = (0..n * n)
+                .filter(|&k| !holes[k as usize])
+                .map(|k| (k / n, k % n))
+                .collect();
+            let grid = |map: &dyn Fn(Label) -> Label| {
+                let labels: Vec<Label> = kept.iter().map(|&t| map(t)).collect();
+                Grid::new(&labels, kept.iter().map(|&t| position(t)), 3)
+            };
+            let reversed = |(r, c): Label| (n - 1 - r, n - 1 - c);
+            let swapped = |(r, c): Label| (c, r);
+            let close = |a: P, b: P| (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9;
+            let Some((f, _, _)) = grid(&|t| t).frame(site) else {
+                return Ok(());
+            };
+            let (g, _, _) = grid(&reversed).frame(reversed(site)).unwrap();
+            for i in 0..2 {
+                proptest::prop_assert!(close(g.u[i], scale(f.u[1 - i], -1.0)), "{:?} {:?}", f, g);
+                proptest::prop_assert!(close(g.v[i], scale(f.v[1 - i], -1.0)), "{:?} {:?}", f, g);
+            }
+            let (h, _, _) = grid(&swapped).frame(swapped(site)).unwrap();
+            proptest::prop_assert!(close(h.u[0], f.v[0]) && close(h.u[1], f.v[1]), "{:?} {:?}", f, h);
+            proptest::prop_assert!(close(h.v[0], f.u[0]) && close(h.v[1], f.u[1]), "{:?} {:?}", f, h);
+        }
     }
 
     #[test]
