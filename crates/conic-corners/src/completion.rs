@@ -93,9 +93,10 @@
 //!    site outside the board's current label range, verified in the full frame, grows the
 //!    board: it needs a converged (two-sided) answer of [`refine_one`] or the junction model's
 //!    confirmation, since a border square's outer corner next to an occluder passes (a) and (b).
-//! 4. **Acceptance.** A verified corner more than half a step from every corner of every board is
-//!    appended to `corners` (angles from `u` and `v`, score the correlation of (b)) and joins the
-//!    board with label `t`. At the end labels are shifted so that their minimum is 0 again and
+//! 4. **Acceptance.** A verified corner more than half a step from every corner of every board
+//!    (the offset's length in the site's mean steps `u`, `v`: a sliver's corner lies nearer its
+//!    neighbour than half the mean step) is appended to `corners` (angles from `u` and `v`, score
+//!    the correlation of (b)) and joins the board with label `t`. At the end labels are shifted so that their minimum is 0 again and
 //!    the board is re-sorted by `(row, col)`.
 //!
 //! The result depends only on the input: a round's sites are verified in parallel, each against
@@ -307,6 +308,18 @@ fn quick_contrast(image: &GrayImage, p: P, frame: &Frame, phase: f64) -> Option<
     } else {
         pm.min(mp) - pp.max(mm)
     })
+}
+
+/// The length of the offset `d` in grid steps: `|(a, b)|` where `d = a·u + b·v` (the plain
+/// length over the mean step where `u` and `v` are nearly parallel).
+fn in_steps(d: P, u: P, v: P) -> f64 {
+    let det = u[0] * v[1] - u[1] * v[0];
+    if det.abs() <= 1e-6 * norm(u) * norm(v) {
+        return norm(d) / (0.5 * (norm(u) + norm(v))).max(f64::MIN_POSITIVE);
+    }
+    let a = (d[0] * v[1] - d[1] * v[0]) / det;
+    let b = (u[0] * d[1] - u[1] * d[0]) / det;
+    a.hypot(b)
 }
 
 fn add(a: P, b: P) -> P {
@@ -945,7 +958,7 @@ fn complete_one(
             .collect();
         // The verification (step 3 of the module docs) of each site, in parallel: it reads the
         // image and the grid as it stood at the start of the round, never another site's answer.
-        let checked: Vec<Option<(Label, Corner, f64)>> = sites
+        let checked: Vec<Option<(Label, Corner, (P, P))>> = sites
             .par_iter()
             .map(|&(t, p, frame, u, v, step)| {
                 let phase = reference.phase * parity(t);
@@ -1167,14 +1180,16 @@ fn complete_one(
                     angles: [angle(u), angle(v)],
                     score,
                 };
-                Some((t, corner, step))
+                Some((t, corner, (u, v)))
             })
             .collect();
         // In site order, the corners clear of every board's corners and of those accepted
-        // before them this round.
+        // before them this round: more than half a step away in the site's grid frame, so
+        // that a sliver's corner, nearer its neighbour than half the mean step, is no
+        // duplicate of it.
         let mut accepted: Vec<(Label, Corner)> = Vec::new();
-        for (t, z, step) in checked.into_iter().flatten() {
-            let clear = |x: f64, y: f64| (x - z.x).hypot(y - z.y) > 0.5 * step;
+        for (t, z, (u, v)) in checked.into_iter().flatten() {
+            let clear = |x: f64, y: f64| in_steps([x - z.x, y - z.y], u, v) > 0.5;
             let free = boards
                 .iter()
                 .flat_map(|bd| bd.corners.iter())
@@ -1700,6 +1715,20 @@ mod tests {
             proptest::prop_assert!(close(h.u[0], f.v[0]) && close(h.u[1], f.v[1]), "{:?} {:?}", f, h);
             proptest::prop_assert!(close(h.v[0], f.u[0]) && close(h.v[1], f.u[1]), "{:?} {:?}", f, h);
         }
+    }
+
+    #[test]
+    fn offsets_are_measured_in_the_grid_steps() {
+        // Steps of 7 px across the columns and 15 px along them, sheared.
+        let (u, v) = ([7.0, 1.0], [-4.0, 15.0]);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        assert!(close(in_steps(scale(u, 0.7), u, v), 0.7));
+        assert!(close(
+            in_steps(add(scale(u, 0.3), scale(v, -0.4)), u, v),
+            0.5
+        ));
+        // Nearly parallel steps: the plain length over the mean step.
+        assert!(close(in_steps([5.0, 0.0], [10.0, 0.0], [10.0, 1e-9]), 0.5));
     }
 
     #[test]

@@ -766,12 +766,14 @@ fn a_low_resolution_cylinder_keeps_the_columns_beside_its_silhouettes() {
     // squares narrow to 5–8 px, where the edge walks find nothing and the completion placed
     // corners by the gradient estimate, 1.5–2 px off, which the junction model does not
     // confirm; the next rounds' predictions then missed the columns beyond. 57 of the 270
-    // visible corners were missing, now 20.
+    // visible corners were missing, then 19. A sliver's corner lies nearer its neighbour than
+    // half the mean grid step (5 px against 11 here), and the completion refused it as a
+    // duplicate until the distance was measured in the site's own grid steps: now 12.
     let s = scene(Surface::Cylinder { radius_mm: 60.0 }, 102, |t| {
         (t.rows, t.cols, t.square_mm, t.camera) = (15, 21, 8.0, vga());
     });
     let (o, _) = run("640 × 480 cylinder", &s, 2);
-    assert!(o.missing <= 25, "{} missing", o.missing);
+    assert!(o.missing <= 14, "{} missing", o.missing);
     assert!(o.rms < 0.1, "{}", o.rms);
 }
 
