@@ -96,8 +96,8 @@
 //! 4. **Acceptance.** A verified corner more than half a step from every corner of every board
 //!    (the offset's length in the site's mean steps `u`, `v`: a sliver's corner lies nearer its
 //!    neighbour than half the mean step) is appended to `corners` (angles from `u` and `v`, score
-//!    the correlation of (b)) and joins the board with label `t`. At the end labels are shifted so that their minimum is 0 again and
-//!    the board is re-sorted by `(row, col)`.
+//!    the correlation of (b)) and joins the board with label `t`. At the end labels are shifted
+//!    so that their minimum is 0 again and the board is re-sorted by `(row, col)`.
 //!
 //! The result depends only on the input: a round's sites are verified in parallel, each against
 //! the grid as it stood at the round's start, then accepted in label order, and the round's
@@ -231,6 +231,12 @@ struct Frame {
 }
 
 impl Frame {
+    /// The mean column and row steps `(u, v)` of both sides.
+    fn mean(&self) -> (P, P) {
+        let mean = |s: [P; 2]| scale(add(s[0], s[1]), 0.5);
+        (mean(self.u), mean(self.v))
+    }
+
     fn scaled(&self, s: f64) -> Self {
         Self {
             u: self.u.map(|u| scale(u, s)),
@@ -411,10 +417,9 @@ impl Grid {
     }
 
     /// The frame of `t` from the nearest labelled pairs on each side of it (a side without
-    /// pairs takes the other's step), and its mean column and row steps `(u, v)`. On a bent
-    /// board the two sides' steps turn and shrink with the edges, which a junction's samples
-    /// then follow.
-    fn frame(&self, t: Label) -> Option<(Frame, P, P)> {
+    /// pairs takes the other's step). On a bent board the two sides' steps turn and shrink with
+    /// the edges, which a junction's samples then follow.
+    fn frame(&self, t: Label) -> Option<Frame> {
         let sides = |e: Label| -> Option<[P; 2]> {
             match (self.side_step(t, e, 1), self.side_step(t, e, -1)) {
                 (Some(a), Some(b)) => Some([a, b]),
@@ -422,9 +427,10 @@ impl Grid {
                 (None, None) => None,
             }
         };
-        let (u, v) = (sides((0, 1))?, sides((1, 0))?);
-        let mean = |s: [P; 2]| scale(add(s[0], s[1]), 0.5);
-        Some((Frame { u, v }, mean(u), mean(v)))
+        Some(Frame {
+            u: sides((0, 1))?,
+            v: sides((1, 0))?,
+        })
     }
 
     /// Every prediction of `t` (rule step 2), pushed to `out`.
@@ -501,7 +507,7 @@ fn parity((r, c): Label) -> f64 {
 
 /// The [`junction`] at the labelled corner `t`, in the frame of its labelled neighbours' steps.
 fn labelled_junction(image: &GrayImage, grid: &Grid, t: Label) -> Option<Junction> {
-    let (p, (frame, _, _)) = (grid.get(t)?, grid.frame(t)?);
+    let (p, frame) = (grid.get(t)?, grid.frame(t)?);
     junction(image, p, &frame)
 }
 
@@ -925,8 +931,9 @@ fn complete_one(
     let mut added = 0;
     for _ in 0..params.rounds {
         let (r0, r1, c0, c1) = range(&boards[b].labels);
-        // The sites to check this round, with their consensus prediction, grid frame and step.
-        let mut sites: Vec<(Label, P, Frame, P, P, f64)> = Vec::new();
+        // The sites to check this round, with their consensus prediction, grid frame and mean
+        // step.
+        let mut sites: Vec<(Label, P, Frame, f64)> = Vec::new();
         for r in r0 - 1..=r1 + 1 {
             for c in c0 - 1..=c1 + 1 {
                 let t = (r, c);
@@ -938,12 +945,13 @@ fn complete_one(
                     continue;
                 }
                 tried.insert(t, preds.len());
-                let Some((frame, u, v)) = grid.frame(t) else {
+                let Some(frame) = grid.frame(t) else {
                     continue;
                 };
+                let (u, v) = frame.mean();
                 let step = 0.5 * (norm(u) + norm(v));
                 if let Some(p) = consensus(&mut preds, params.agreement * step) {
-                    sites.push((t, p, frame, u, v, step));
+                    sites.push((t, p, frame, step));
                 }
             }
         }
@@ -960,7 +968,8 @@ fn complete_one(
         // image and the grid as it stood at the start of the round, never another site's answer.
         let checked: Vec<Option<(Label, Corner, (P, P))>> = sites
             .par_iter()
-            .map(|&(t, p, frame, u, v, step)| {
+            .map(|&(t, p, frame, step)| {
+                let (u, v) = frame.mean();
                 let phase = reference.phase * parity(t);
                 // A site on the board's boundary may have slivers beyond it (squares
                 // foreshortened at a silhouette): its outer side is sampled in a narrower frame
