@@ -30,7 +30,7 @@ use crate::edge_sampling::{
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
     corner_covariance, fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
-    CurveFit, PositionStats, SAMPLE_BIAS_SIGMA_PX,
+    CurveFit, EdgeModel, Line, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;
@@ -119,8 +119,9 @@ pub struct Refined {
     /// RMS distance (px) of the edge samples to their fitted curves; `None` when failed.
     pub residual: Option<f64>,
     /// Standard deviation (px) of the position in its worst direction, propagated from the
-    /// residuals of the two curve fits (as in [`crate::board_fit`]); `None` when failed or when
-    /// the curves did not meet and straight lines stood in.
+    /// residuals of the two curve fits (as in [`crate::board_fit`]), or where the curves did not
+    /// meet and straight lines stood in, of the two line fits with their RMS residual as a model
+    /// error; `None` when failed.
     pub sigma: Option<f64>,
     /// Edge samples used by the two curve fits.
     pub samples: usize,
@@ -556,10 +557,9 @@ impl Walks {
             }
             None => {
                 status = Status::Fallback;
-                (
-                    intersect_lines(lines[0].as_ref()?, lines[1].as_ref()?)?,
-                    None,
-                )
+                let (l0, l1) = (lines[0]?, lines[1]?);
+                let p = intersect_lines(&l0, &l1)?;
+                (p, self.line_sigma([l0, l1], p))
             }
         };
         Some(Solution {
@@ -570,6 +570,41 @@ impl Walks {
             samples,
             directions: self.directions(),
         })
+    }
+
+    /// σ (px, worst direction) of the intersection `p` of the straight lines that stand in where
+    /// the two curves did not meet, from each line's position variance along its edge's samples.
+    /// The lines miss the edges' bending, which the residuals show but their variance at `p`
+    /// averages away: the larger of the two lines' RMS residuals enters as a systematic term.
+    fn line_sigma(&mut self, lines: [Line; 2], p: [f64; 2]) -> Option<f64> {
+        let mut spread = [(0.0, 0.0); 2];
+        for (e, line) in lines.iter().enumerate() {
+            self.points.clear();
+            self.points.extend(
+                self.rays[e]
+                    .iter()
+                    .chain(&self.rays[e + 2])
+                    .map(|s| s.point),
+            );
+            let curve = Curve::Line(*line);
+            let stats = PositionStats::new(self.points.iter(), &curve, EdgeModel::Line)?;
+            let sq: f64 = self
+                .points
+                .iter()
+                .map(|q| curve.distance(q[0], q[1]).powi(2))
+                .sum();
+            spread[e] = (stats.variance_at(p), (sq / self.points.len() as f64).sqrt());
+        }
+        let model = spread[0].1.max(spread[1].1);
+        corner_covariance(
+            &Curve::Line(lines[0]),
+            spread[0].0,
+            &Curve::Line(lines[1]),
+            spread[1].0,
+            p,
+            SAMPLE_BIAS_SIGMA_PX.hypot(model),
+        )
+        .map(|c| c.sigma)
     }
 }
 

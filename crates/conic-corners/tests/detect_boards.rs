@@ -1020,6 +1020,24 @@ fn an_occluder_s_edge_beside_a_border_square_is_no_sliver_junction() {
     );
 }
 
+#[test]
+fn every_corner_reports_its_uncertainty() {
+    // On this pose the local refiner's curves for the corner beside the bar's edge at a sliver
+    // (truth (8, 7), past the visibility limit) do not meet, and straight lines stand in: its σ
+    // was missing. It now comes from the lines' fits, with their residuals as a model error.
+    let s = scene(Surface::Cylinder { radius_mm: 60.0 }, 102, |t| {
+        t.occluders = vec![report_bar()]
+    });
+    let det = detect(
+        &s.render(2).expect("valid scene").image,
+        &DetectParams::default(),
+    );
+    assert!(!det.boards.is_empty());
+    for c in det.boards.iter().flat_map(|b| &b.corners) {
+        assert!(c.sigma.is_some_and(|s| s.is_finite() && s > 0.0), "{c:?}");
+    }
+}
+
 /// The robustness report's bar across the image: 40 px wide, gray 0.3.
 fn report_bar() -> Occluder {
     Occluder {
