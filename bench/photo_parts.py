@@ -17,15 +17,14 @@ right: each photo shows one board). A part that gives no board is listed too (so
 board at all, or a single column of it). With a baseline CLI, the parts whose outcome differs
 are marked. Exit status 0.
 """
-import argparse
 import collections
 import json
-import pathlib
 import random
 import subprocess
 import sys
 
 from PIL import Image
+from photo_common import photo_args
 
 
 def detect(cli, path):
@@ -62,21 +61,14 @@ def verdict(out):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cli", required=True)
-    ap.add_argument("--baseline")
-    ap.add_argument("--photos", default="../shared/images/curved-hydramarker")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--random", type=int, default=12)
-    ap.add_argument("--seed", type=int, default=4)
-    ap.add_argument("--scale", type=float, default=1.0)
-    args = ap.parse_args()
+    def extra(ap):
+        ap.add_argument("--random", type=int, default=12)
+        ap.add_argument("--seed", type=int, default=4)
+        ap.add_argument("--scale", type=float, default=1.0)
+
+    args, photos, out = photo_args("photo_parts", __doc__, extra)
     if not 0.05 <= args.scale <= 1.0:
         sys.exit("photo_parts: --scale must lie in [0.05, 1]")
-    photos, out = pathlib.Path(args.photos), pathlib.Path(args.out)
-    if not photos.is_dir():
-        sys.exit(f"photo_parts: {photos} not found")
-    out.mkdir(parents=True, exist_ok=True)
     rng = random.Random(args.seed)
     clis = [args.cli] + ([args.baseline] if args.baseline else [])
     counts = [collections.Counter() for _ in clis]

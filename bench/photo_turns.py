@@ -13,15 +13,14 @@ copy's corners with none. `labels` is `ok` when one of the eight signed permutat
 axes plus one offset maps every matched corner's label onto its upright match's, else the number
 of matched corners that disagree with the best such map. Exit status 0.
 """
-import argparse
 import collections
 import json
 import math
 import pathlib
 import subprocess
-import sys
 
 from PIL import Image
+from photo_common import photo_args
 
 # name: (Pillow transpose, map of a pixel centre (x, y) of the copy back to the upright image of
 # size (w, h))
@@ -69,16 +68,7 @@ def compare(upright, copy, back, size):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cli", required=True)
-    ap.add_argument("--baseline")
-    ap.add_argument("--photos", default="../shared/images/curved-hydramarker")
-    ap.add_argument("--out", required=True)
-    args = ap.parse_args()
-    photos, out = pathlib.Path(args.photos), pathlib.Path(args.out)
-    if not photos.is_dir():
-        sys.exit(f"photo_turns: {photos} not found")
-    out.mkdir(parents=True, exist_ok=True)
+    args, photos, out = photo_args("photo_turns", __doc__)
     sizes = {}
     for f in sorted(photos.glob("*.jpg")):
         im = Image.open(f).convert("L")

@@ -22,14 +22,12 @@ plus five crops that hold no board (they must give no board).
 Then CLI (and BASELINE, if given) runs `detect` on each copy; the table lists every copy's board
 sizes, and with a baseline the copies whose boards differ. Exit status 0.
 """
-import argparse
 import json
-import pathlib
 import subprocess
-import sys
 
 import numpy as np
 from PIL import Image, ImageEnhance, ImageFilter
+from photo_common import photo_args
 
 CROPS = {  # name: (photo, box)
     "c6top": ("curve_6.jpg", (0, 0, 2248, 800)),
@@ -92,16 +90,7 @@ def boards(cli, path):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cli", required=True)
-    ap.add_argument("--baseline")
-    ap.add_argument("--photos", default="../shared/images/curved-hydramarker")
-    ap.add_argument("--out", required=True)
-    args = ap.parse_args()
-    photos, out = pathlib.Path(args.photos), pathlib.Path(args.out)
-    if not photos.is_dir():
-        sys.exit(f"photo_variants: {photos} not found")
-    out.mkdir(parents=True, exist_ok=True)
+    args, photos, out = photo_args("photo_variants", __doc__)
     names = make(photos, out)
     differ = 0
     for name in names:
