@@ -1404,7 +1404,7 @@ fn model_gap(curve: &Curve, model: EdgeModel, points: &[[f64; 2]], p: [f64; 2]) 
         (d(p[0], p[1] + H) - d(p[0], p[1] - H)) / (2.0 * H),
     ];
     let norm2 = g[0] * g[0] + g[1] * g[1];
-    if !(norm2 > 0.0) {
+    if norm2.is_nan() || norm2 <= 0.0 {
         return 0.0;
     }
     let k = d(p[0], p[1]) / norm2;

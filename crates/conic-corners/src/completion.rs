@@ -162,6 +162,8 @@ impl Default for CompletionParams {
 
 type Label = (i32, i32);
 type P = [f64; 2];
+/// A verified site: its label, the corner found there and the site's grid steps `(u, v)`.
+type Verified = (Label, Corner, (P, P));
 
 /// Grid-frame sample offsets `(a, b)` and whether each is inner (`|a| + |b| ≤ 0.24`), grouped by
 /// quadrant: `(+,+)`, `(+,−)`, `(−,+)`, `(−,−)`; 21 per quadrant.
@@ -570,7 +572,7 @@ const EDGE_MIDDLE_CONTRAST: f64 = 0.35;
 pub fn edge_seen(image: &GrayImage, a: P, b: P) -> bool {
     let d = sub(b, a);
     let len = d[0].hypot(d[1]);
-    if !(len >= 4.0) {
+    if len.is_nan() || len < 4.0 {
         return true;
     }
     let n = [-d[1] / len, d[0] / len];
@@ -822,6 +824,16 @@ fn elected_at(free: &[Corner], p: P, (u, v): (P, P), radius: f64) -> Option<(P, 
         .map(|(c, _)| ([c.x, c.y], c.score))
 }
 
+/// What the junction at a site must show: the checker's phase there (±1, the sign of its
+/// quadrants), the smallest contrast (from the board's reference) and the smallest correlation
+/// (`CompletionParams::min_ncc`).
+#[derive(Clone, Copy)]
+struct Expected {
+    phase: f64,
+    min_contrast: f64,
+    min_ncc: f64,
+}
+
 /// Searches the best junction near `p` (coarse to fine, from the one of `starts` with the highest
 /// quick-test contrast, or of its 8 neighbours `refine_step` away if one is higher; 0: none) and
 /// applies checks (a), (b). The search moves by the grid steps `(u, v)`; `starts` are offsets in
@@ -833,9 +845,11 @@ fn verify(
     frame: &Frame,
     starts: impl Iterator<Item = [f64; 2]>,
     refine_step: f64,
-    phase: f64,
-    min_contrast: f64,
-    params: &CompletionParams,
+    Expected {
+        phase,
+        min_contrast,
+        min_ncc,
+    }: Expected,
 ) -> Option<(P, f64)> {
     let score =
         |q: P| -> Option<(f64, f64, f64)> { Some(junction(image, q, frame)?.phased(phase)) };
@@ -881,8 +895,7 @@ fn verify(
         }
     }
     let (n_all, n_inner, contrast) = best_s;
-    (n_all >= params.min_ncc && n_inner >= params.min_ncc && contrast >= min_contrast)
-        .then_some((best, n_all))
+    (n_all >= min_ncc && n_inner >= min_ncc && contrast >= min_contrast).then_some((best, n_all))
 }
 
 /// Completes every board (rule in the [module docs](self)): verified corners are appended to
@@ -966,11 +979,15 @@ fn complete_one(
             .collect();
         // The verification (step 3 of the module docs) of each site, in parallel: it reads the
         // image and the grid as it stood at the start of the round, never another site's answer.
-        let checked: Vec<Option<(Label, Corner, (P, P))>> = sites
+        let checked: Vec<Option<Verified>> = sites
             .par_iter()
             .map(|&(t, p, frame, step)| {
                 let (u, v) = frame.mean();
-                let phase = reference.phase * parity(t);
+                let expected = Expected {
+                    phase: reference.phase * parity(t),
+                    min_contrast,
+                    min_ncc: params.min_ncc,
+                };
                 // A site on the board's boundary may have slivers beyond it (squares
                 // foreshortened at a silhouette): its outer side is sampled in a narrower frame
                 // if the full one fails, and searched farther, as the slivers' corners bend the
@@ -982,69 +999,58 @@ fn complete_one(
                     v: [0, 1].map(|i| scale(frame.v[i], if outer_v[i] { s } else { 1.0 })),
                 };
                 let on_boundary = outer_u.iter().chain(&outer_v).any(|&o| o);
-                let verified = verify(
-                    image,
-                    p,
-                    (u, v),
-                    &frame,
-                    STARTS.into_iter(),
-                    0.0,
-                    phase,
-                    min_contrast,
-                    params,
-                )
-                .map(|(q, score)| (q, score, false))
-                .or_else(|| {
-                    // A site near the image's border whose full frame leaves the image: the
-                    // whole frame is narrowed instead (a board cut by the border, whose corners
-                    // there the election's template cannot reach either).
-                    (junction(image, p, &frame).is_none())
-                        .then(|| {
-                            SLIVER_SCALES.iter().find_map(|&s| {
-                                verify(
-                                    image,
-                                    p,
-                                    (u, v),
-                                    &frame.scaled(s),
-                                    STARTS.into_iter(),
-                                    0.0,
-                                    phase,
-                                    min_contrast,
-                                    params,
-                                )
-                            })
-                        })?
-                        .map(|(q, score)| (q, score, true))
-                })
-                .or_else(|| {
-                    // Nearer the border than even the narrowed frames reach (on large squares a
-                    // quarter frame spans 20 px and more): the election's test, on its 15-px
-                    // patch, verified an X-junction there if it elected a corner at the
-                    // prediction with its edges along the grid. No board took that corner, as
-                    // its grid cells leave the image.
-                    (junction(image, p, &frame).is_none())
-                        .then(|| elected_at(&free, p, (u, v), params.agreement * step))?
-                        .map(|(q, score)| (q, score, true))
-                })
-                .or_else(|| {
-                    on_boundary
-                        .then(|| {
-                            SLIVER_SCALES.iter().find_map(|&s| {
-                                verify(
-                                    image,
-                                    p,
-                                    (u, v),
-                                    &sliver(s),
-                                    sliver_starts(outer_u.contains(&true), outer_v.contains(&true)),
-                                    SLIVER_REFINE_STEP,
-                                    phase,
-                                    min_contrast,
-                                    params,
-                                )
-                            })
-                        })?
-                        .map(|(q, score)| (q, score, true))
-                });
+                let verified = verify(image, p, (u, v), &frame, STARTS.into_iter(), 0.0, expected)
+                    .map(|(q, score)| (q, score, false))
+                    .or_else(|| {
+                        // A site near the image's border whose full frame leaves the image: the
+                        // whole frame is narrowed instead (a board cut by the border, whose corners
+                        // there the election's template cannot reach either).
+                        (junction(image, p, &frame).is_none())
+                            .then(|| {
+                                SLIVER_SCALES.iter().find_map(|&s| {
+                                    verify(
+                                        image,
+                                        p,
+                                        (u, v),
+                                        &frame.scaled(s),
+                                        STARTS.into_iter(),
+                                        0.0,
+                                        expected,
+                                    )
+                                })
+                            })?
+                            .map(|(q, score)| (q, score, true))
+                    })
+                    .or_else(|| {
+                        // Nearer the border than even the narrowed frames reach (on large squares a
+                        // quarter frame spans 20 px and more): the election's test, on its 15-px
+                        // patch, verified an X-junction there if it elected a corner at the
+                        // prediction with its edges along the grid. No board took that corner, as
+                        // its grid cells leave the image.
+                        (junction(image, p, &frame).is_none())
+                            .then(|| elected_at(&free, p, (u, v), params.agreement * step))?
+                            .map(|(q, score)| (q, score, true))
+                    })
+                    .or_else(|| {
+                        on_boundary
+                            .then(|| {
+                                SLIVER_SCALES.iter().find_map(|&s| {
+                                    verify(
+                                        image,
+                                        p,
+                                        (u, v),
+                                        &sliver(s),
+                                        sliver_starts(
+                                            outer_u.contains(&true),
+                                            outer_v.contains(&true),
+                                        ),
+                                        SLIVER_REFINE_STEP,
+                                        expected,
+                                    )
+                                })
+                            })?
+                            .map(|(q, score)| (q, score, true))
+                    });
                 let (q, score, narrow) = verified?;
                 // (c) The refiner must place the corner near the prediction. Long walks fail
                 // where scribbles or an occluder cut the edges, so shorter reaches are tried
@@ -1650,7 +1656,7 @@ mod tests {
         };
         let mut kept = vec![whole.clone()];
         assert_eq!(split_by_phase(&image, &corners, &mut kept, 4), 0);
-        assert_eq!(kept, [whole.clone()]);
+        assert_eq!(kept, std::slice::from_ref(&whole));
 
         // True rows 0, 2, 4 and 6 labelled 0..3.
         let mut skipping = vec![relabelled(&|(r, c)| (r % 2 == 0).then_some((r / 2, c)))];

@@ -676,6 +676,16 @@ const TURN_REACH: f64 = 0.5;
 /// piece jumps a column hidden behind a pen.
 const TURN_STEP_RATIO: f64 = 1.5;
 
+/// A label `(row, col)`, a label offset between two pieces, or a step along an axis.
+type Label = (i32, i32);
+
+/// [`merge_split_boards`]' votes: per other piece and label offset, the lines that landed there.
+type Votes = HashMap<(usize, Label), usize>;
+
+/// A line's hit at the next site of another piece whose steps disagree: (other piece, label
+/// offset, label, axis, this piece's corner, the other's corner).
+type Turning = (usize, Label, Label, Label, usize, usize);
+
 /// The steps of a board's grid line at label `l` (position `p`) along the label axis `e`: to the
 /// next corner and from the previous one, `None` when it has neither.
 fn step_at(
@@ -788,12 +798,10 @@ pub fn merge_split_boards(
                     .map(move |(&i, &l)| (b, i, l))
             })
             .collect();
-        let mut tallies: Vec<HashMap<(usize, (i32, i32)), usize>> = Vec::new();
+        let mut tallies: Vec<Votes> = Vec::new();
         for (a, board) in boards.iter().enumerate() {
-            let mut votes: HashMap<(usize, (i32, i32)), usize> = HashMap::new();
-            // Hits at the next site whose steps disagree: (board, offset, label, axis, i, j).
-            let mut turning: Vec<(usize, (i32, i32), (i32, i32), (i32, i32), usize, usize)> =
-                Vec::new();
+            let mut votes = Votes::new();
+            let mut turning: Vec<Turning> = Vec::new();
             for (&i, &l) in board.corners.iter().zip(&board.labels) {
                 for d in AXES {
                     if maps[a].contains_key(&(l.0 + d.0, l.1 + d.1)) {

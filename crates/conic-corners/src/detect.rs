@@ -717,7 +717,8 @@ fn fuse((c, cc): (DetectedCorner, Cov), (j, cj): (DetectedCorner, Cov)) -> Optio
     let (cc, cj) = (m(cc), m(cj));
     let (pc, pj) = (Vector2::new(c.x, c.y), Vector2::new(j.x, j.y));
     let d = pc - pj;
-    if !(d.dot(&((cc + cj).try_inverse()? * d)) <= CHI2_2_99) {
+    let q = d.dot(&((cc + cj).try_inverse()? * d));
+    if q.is_nan() || q > CHI2_2_99 {
         return None;
     }
     let (ic, ij) = (cc.try_inverse()?, cj.try_inverse()?);

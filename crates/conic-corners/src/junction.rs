@@ -418,7 +418,7 @@ fn fit_junction(
             .chain(&angles)
             .chain(&values)
             .all(|v| v.is_finite())
-        || !(guess.w > 0.0)
+        || guess.w <= 0.0
     {
         return None;
     }
@@ -828,7 +828,7 @@ impl Geometry {
         let n = [[-t[0][1], t[0][0]], [-t[1][1], t[1][0]]];
         let rho = (th1 - th2).cos();
         let root = (1.0 - rho * rho).sqrt();
-        if !(root > 1e-3) {
+        if root.is_nan() || root <= 1e-3 {
             return None;
         }
         let half = 0.5 * rho.asin();
@@ -1033,10 +1033,10 @@ impl Geometry {
         let (hi, kj) = (hk[sliver.edge], hk[1 - sliver.edge]);
         let u = px(|l| sgn * (hi[l] - sliver.offset * self.inv_w));
         let mut w = self.wedge(&u, kj, sgn);
-        for l in 0..PX {
-            w.value[l] = -2.0 * sgn * (2.0 * w.value[l] - cdf(u[l]));
+        for (l, &ul) in u.iter().enumerate() {
+            w.value[l] = -2.0 * sgn * (2.0 * w.value[l] - cdf(ul));
             // ∂u/∂hᵢ = ±1 cancels the leading sign.
-            w.dh[l] = -2.0 * (2.0 * w.dh[l] - pdf(u[l]));
+            w.dh[l] = -2.0 * (2.0 * w.dh[l] - pdf(ul));
             w.dk[l] *= -4.0 * sgn;
             // ∂(±ρ)/∂ρ = ±1.
             w.drho[l] *= -4.0;
@@ -1257,7 +1257,7 @@ mod tests {
             let width = span / pieces as f64;
             let mut sum = 0.0;
             for piece in 0..pieces {
-                for &(x, wt) in &GL_RULES[2].1[..] {
+                for &(x, wt) in GL_RULES[2].1 {
                     for sign in [-1.0, 1.0] {
                         let phi = width * (piece as f64 + 0.5 + 0.5 * sign * x);
                         let c = phi.cos();

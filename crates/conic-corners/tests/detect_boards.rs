@@ -58,6 +58,12 @@ fn symmetries() -> impl Iterator<Item = impl Fn((i32, i32)) -> (i32, i32)> {
 /// A truth label and the detected label of one corner.
 type LabelPair = ((i32, i32), (i32, i32));
 
+/// Maps a pixel centre `(x, y)` of a turned photo back into the upright photo of size `(w, h)`.
+type TurnBack = fn(f64, f64, f64, f64) -> (f64, f64);
+
+/// Parts of a photo: the file and its named windows `(x0, y0, width, height)`.
+type PhotoParts = (&'static str, &'static [(&'static str, [usize; 4])]);
+
 struct Outcome {
     missing: usize,
     rms: f64,
@@ -476,11 +482,7 @@ fn a_turned_photo_gives_the_same_corners() {
             &DetectParams::default(),
         ));
         // Each turn with the map of its pixel centres back into the upright photo.
-        let turns: [(
-            &str,
-            image::DynamicImage,
-            fn(f64, f64, f64, f64) -> (f64, f64),
-        ); 2] = [
+        let turns: [(&str, image::DynamicImage, TurnBack); 2] = [
             ("180°", photo.rotate180(), |x, y, w, h| {
                 (w - 1.0 - x, h - 1.0 - y)
             }),
@@ -539,7 +541,7 @@ fn parts_of_photos_split_by_an_occluder_or_a_fold_are_labelled_like_the_whole() 
         return;
     };
     // (x0, y0, width, height); 0 for "to the photo's edge".
-    let parts: [(&str, &[(&str, [usize; 4])]); 3] = [
+    let parts: [PhotoParts; 3] = [
         (
             "marker_real3.jpg",
             &[
