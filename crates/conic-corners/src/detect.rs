@@ -58,11 +58,11 @@ pub struct DetectParams {
     /// A board-wide answer whose σ exceeds this multiple of its board's median σ (at most 0.1 px;
     /// less support than most: curved, short or extrapolated lines) is combined with the junction
     /// model's answer. Default 1.5. Lower is more accurate and slower: at 1.0 (measured at
-    /// `b03cdf6`) the curved-board benchmark's corners go 0.0072 → 0.0067 px RMS (flattest
-    /// curvature bin 0.0067 → 0.0062, top bin 0.0154 → 0.0141, stereo reprojection 0.0040 → 0.0036
-    /// px) and the robustness report's geometric mean 0.0196 → 0.0195 px, but `detect` on the speed
-    /// benchmark's flat board takes about 5 ms more (half its corners get a junction fit) and on
-    /// `curve_6.jpg` 10 ms more (one thread). `∞` combines only the doubtful answers.
+    /// `56ebd3c`) the curved-board benchmark's corners go 0.0070 → 0.0066 px RMS (flattest
+    /// curvature bin 0.0064 → 0.0061, top bin 0.0148 → 0.0143), but `detect` on the speed
+    /// benchmark's flat board takes 14.8 → 22.7 ms (more than half its corners get a junction
+    /// fit), on `curve_6.jpg` 99 → 113 ms and on `marker_real2.jpg` 93 → 107 ms (one thread,
+    /// median of 7). `∞` combines only the doubtful answers.
     pub junction_gate: f64,
     /// A board-wide answer whose σ exceeds this multiple of the board's median σ (at most 0.1 px)
     /// is doubtful: the corner goes to the local refiner, and to the junction model (failing that,
