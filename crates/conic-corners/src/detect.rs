@@ -60,7 +60,7 @@ pub struct DetectParams {
     /// model's answer. Default 1.5. Lower is more accurate and slower: at 1.0 (measured at
     /// `56ebd3c`) the curved-board benchmark's corners go 0.0070 → 0.0066 px RMS (flattest
     /// curvature bin 0.0064 → 0.0061, top bin 0.0148 → 0.0143), but `detect` on the speed
-    /// benchmark's flat board takes 14.8 → 22.7 ms (more than half its corners get a junction
+    /// benchmark's flat board takes 14.8 → 22.7 ms (at `b03cdf6` half its corners got a junction
     /// fit), on `curve_6.jpg` 99 → 113 ms and on `marker_real2.jpg` 93 → 107 ms (one thread,
     /// median of 7). `∞` combines only the doubtful answers.
     pub junction_gate: f64,
