@@ -999,24 +999,25 @@ fn complete_one(
                     v: [0, 1].map(|i| scale(frame.v[i], if outer_v[i] { s } else { 1.0 })),
                 };
                 let on_boundary = outer_u.iter().chain(&outer_v).any(|&o| o);
-                let verified = verify(image, p, (u, v), &frame, STARTS.into_iter(), 0.0, expected)
+                // Every search at this site: the same prediction, grid steps and expectations,
+                // in the given frame from the given starts.
+                let check =
+                    |frame: &Frame, starts: &mut dyn Iterator<Item = [f64; 2]>, refine_step| {
+                        verify(image, p, (u, v), frame, starts, refine_step, expected)
+                    };
+                // Whether the full frame leaves the image, asked by two of the fallbacks below.
+                let leaves = std::cell::OnceCell::new();
+                let frame_leaves = || *leaves.get_or_init(|| junction(image, p, &frame).is_none());
+                let verified = check(&frame, &mut STARTS.into_iter(), 0.0)
                     .map(|(q, score)| (q, score, false))
                     .or_else(|| {
                         // A site near the image's border whose full frame leaves the image: the
                         // whole frame is narrowed instead (a board cut by the border, whose corners
                         // there the election's template cannot reach either).
-                        (junction(image, p, &frame).is_none())
+                        frame_leaves()
                             .then(|| {
                                 SLIVER_SCALES.iter().find_map(|&s| {
-                                    verify(
-                                        image,
-                                        p,
-                                        (u, v),
-                                        &frame.scaled(s),
-                                        STARTS.into_iter(),
-                                        0.0,
-                                        expected,
-                                    )
+                                    check(&frame.scaled(s), &mut STARTS.into_iter(), 0.0)
                                 })
                             })?
                             .map(|(q, score)| (q, score, true))
@@ -1027,7 +1028,7 @@ fn complete_one(
                         // patch, verified an X-junction there if it elected a corner at the
                         // prediction with its edges along the grid. No board took that corner, as
                         // its grid cells leave the image.
-                        (junction(image, p, &frame).is_none())
+                        frame_leaves()
                             .then(|| elected_at(&free, p, (u, v), params.agreement * step))?
                             .map(|(q, score)| (q, score, true))
                     })
@@ -1035,18 +1036,11 @@ fn complete_one(
                         on_boundary
                             .then(|| {
                                 SLIVER_SCALES.iter().find_map(|&s| {
-                                    verify(
-                                        image,
-                                        p,
-                                        (u, v),
-                                        &sliver(s),
-                                        sliver_starts(
-                                            outer_u.contains(&true),
-                                            outer_v.contains(&true),
-                                        ),
-                                        SLIVER_REFINE_STEP,
-                                        expected,
-                                    )
+                                    let mut starts = sliver_starts(
+                                        outer_u.contains(&true),
+                                        outer_v.contains(&true),
+                                    );
+                                    check(&sliver(s), &mut starts, SLIVER_REFINE_STEP)
                                 })
                             })?
                             .map(|(q, score)| (q, score, true))
