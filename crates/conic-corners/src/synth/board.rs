@@ -54,7 +54,7 @@
 //! of the sheet hides it, and no occluder comes within [`OCCLUSION_CLEARANCE`] pixels of it.
 
 use super::corner::{check, jitter};
-use super::{add_gaussian_noise, gaussian_blur, SynthError};
+use super::{add_gaussian_noise, blur_cells, blur_then_integrate, SynthError};
 use crate::GrayImage;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -867,10 +867,14 @@ impl BoardGeometry {
             .collect()
     }
 
-    /// The area-sampled image of sheet and occluders, before lighting, blur and noise.
-    fn area_sample(&self, s: usize) -> GrayImage {
-        let (w, h) = (self.lens.cam.width, self.lens.cam.height);
-        // Labels of the (w+1)×(h+1) pixel corners, shared by neighbouring pixels.
+    /// The area-sampled image of sheet and occluders, before lighting, blur and noise, on cells of
+    /// `1/m` px (`m = 1`: the pixels), each with about `s/m` sub-samples per side where an edge
+    /// may cross it.
+    fn area_sample(&self, s: usize, m: usize) -> GrayImage {
+        let (w, h) = (self.lens.cam.width * m, self.lens.cam.height * m);
+        let (s, unit) = (s.div_ceil(m), 1.0 / m as f64);
+        let at = |i: usize| (i as f64 + 0.5) * unit - 0.5;
+        // Labels of the (w+1)×(h+1) cell corners, shared by neighbouring cells.
         let side = w + 1;
         let mut corners = vec![0u32; side * (h + 1)];
         corners
@@ -878,22 +882,22 @@ impl BoardGeometry {
             .enumerate()
             .for_each(|(j, row)| {
                 for (i, l) in row.iter_mut().enumerate() {
-                    *l = self.label(i as f64 - 0.5, j as f64 - 0.5);
+                    *l = self.label(i as f64 * unit - 0.5, j as f64 * unit - 0.5);
                 }
             });
-        let step = 1.0 / s as f64;
+        let step = unit / s as f64;
         let inv = 1.0 / (s * s) as f32;
         let mut data = vec![0.0f32; w * h];
         data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let yf = y as f64;
+            let yf = at(y);
             for (x, out) in row.iter_mut().enumerate() {
-                let xf = x as f64;
-                // A bar edge within 0.75 px (> half the pixel diagonal) may cross the pixel.
+                let xf = at(x);
+                // A bar edge within 0.75 cell (> half the cell's diagonal) may cross the cell.
                 let mut mixed = false;
                 let mut cover = None;
                 for o in &self.occluders {
                     let d = o.axis_distance(xf, yf) - 0.5 * o.width;
-                    if d.abs() <= 0.75 {
+                    if d.abs() <= 0.75 * unit {
                         mixed = true;
                     } else if d < 0.0 {
                         cover = Some(o.intensity as f32);
@@ -918,8 +922,8 @@ impl BoardGeometry {
                     for b in 0..s {
                         for a in 0..s {
                             let (jx, jy) = jitter(key + (b * s + a) as u64);
-                            let sx = xf - 0.5 + (a as f64 + jx) * step;
-                            let sy = yf - 0.5 + (b as f64 + jy) * step;
+                            let sx = xf - 0.5 * unit + (a as f64 + jx) * step;
+                            let sy = yf - 0.5 * unit + (b as f64 + jy) * step;
                             sum += self.sample(sx, sy);
                         }
                     }
@@ -1093,30 +1097,37 @@ impl BoardScene {
     /// The area-sampled, lit image before blur and noise.
     pub fn render_sharp(&self) -> Result<GrayImage, SynthError> {
         let g = self.geometry()?;
-        Ok(self.sharp(&g))
+        Ok(self.sharp(&g, 1))
     }
 
-    fn sharp(&self, g: &BoardGeometry) -> GrayImage {
-        let mut img = g.area_sample(self.supersample);
+    /// [`BoardGeometry::area_sample`] on cells of `1/m` px, lit.
+    fn sharp(&self, g: &BoardGeometry, m: usize) -> GrayImage {
+        let mut img = g.area_sample(self.supersample, m);
         let [gx, gy] = self.lighting_gradient;
         if gx != 0.0 || gy != 0.0 {
-            let (w, h) = (img.width(), img.height());
-            let (mx, my) = (0.5 * (w as f64 - 1.0), 0.5 * (h as f64 - 1.0));
-            for (y, row) in img.data_mut().chunks_mut(w).enumerate() {
-                let gain_y = gy * (y as f64 - my) / h as f64;
+            let (w, h) = (g.lens.cam.width as f64, g.lens.cam.height as f64);
+            let (mx, my) = (0.5 * (w - 1.0), 0.5 * (h - 1.0));
+            let unit = 1.0 / m as f64;
+            let cells = img.width();
+            for (y, row) in img.data_mut().chunks_mut(cells).enumerate() {
+                let gain_y = gy * ((y as f64 + 0.5) * unit - 0.5 - my) / h;
                 for (x, v) in row.iter_mut().enumerate() {
-                    *v *= (1.0 + gx * (x as f64 - mx) / w as f64 + gain_y) as f32;
+                    let gain_x = gx * ((x as f64 + 0.5) * unit - 0.5 - mx) / w;
+                    *v *= (1.0 + gain_x + gain_y) as f32;
                 }
             }
         }
         img
     }
 
-    /// Renders the scene (area sampling, occluders, lighting, blur, then noise drawn from
-    /// `ChaCha8Rng::seed_from_u64(seed)`) with the truth of every corner.
+    /// Renders the scene (area sampling, occluders and lighting on cells of `1/m` px, blur, each
+    /// pixel the mean of its cells, then noise drawn from `ChaCha8Rng::seed_from_u64(seed)`; see
+    /// [`super::blur_then_integrate`] for why the blur comes first) with the truth of every
+    /// corner.
     pub fn render(&self, seed: u64) -> Result<RenderedBoard, SynthError> {
         let g = self.geometry()?;
-        let clean = gaussian_blur(&self.sharp(&g), self.blur);
+        let m = blur_cells(self.blur);
+        let clean = blur_then_integrate(&self.sharp(&g, m), m, self.blur);
         let mut image = clean.clone();
         add_gaussian_noise(&mut image, self.noise, &mut ChaCha8Rng::seed_from_u64(seed));
         Ok(RenderedBoard {

@@ -31,9 +31,12 @@
 //! to `1/2s` px (0.03 px at `s = 16`) along the whole edge — where jitter leaves a zero-mean error of
 //! at most `0.5/s^1.5` of the contrast per edge pixel, which averages out along the edge. An edge on
 //! a cell boundary (e.g. a quarter-pixel offset with `s` a multiple of 4) is still sampled exactly.
-//! Then a Gaussian blur in the image and white Gaussian noise from a seeded ChaCha8 generator.
+//! The blur comes before the pixels, as in a camera: the pattern is area-sampled on cells of
+//! `1/m` px (`m` from [`super::blur_cells`]: the blur spans two cells), blurred there, and each
+//! pixel averages its `m × m` cells ([`super::blur_then_integrate`]). Then white Gaussian noise
+//! from a seeded ChaCha8 generator.
 
-use super::{add_gaussian_noise, gaussian_blur, SynthError};
+use super::{add_gaussian_noise, blur_cells, blur_then_integrate, SynthError};
 use crate::GrayImage;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -345,7 +348,7 @@ impl CornerScene {
     /// The area-sampled pattern before blur and noise.
     pub fn render_sharp(&self) -> Result<GrayImage, SynthError> {
         let g = self.geometry()?;
-        Ok(area_sample(&g, self.size, self.supersample))
+        Ok(area_sample(&g, self.size, self.supersample, 1))
     }
 
     /// Renders the scene: area sampling, blur [`blur`](Self::blur), then noise
@@ -354,8 +357,9 @@ impl CornerScene {
     /// platform's `sin`/`cos`, which only matters for sub-samples lying exactly on an edge).
     pub fn render(&self, seed: u64) -> Result<RenderedCorner, SynthError> {
         let geometry = self.geometry()?;
-        let sharp = area_sample(&geometry, self.size, self.supersample);
-        let clean = gaussian_blur(&sharp, self.blur);
+        let m = blur_cells(self.blur);
+        let cells = area_sample(&geometry, self.size, self.supersample, m);
+        let clean = blur_then_integrate(&cells, m, self.blur);
         let mut image = clean.clone();
         add_gaussian_noise(&mut image, self.noise, &mut ChaCha8Rng::seed_from_u64(seed));
         Ok(RenderedCorner {
@@ -382,14 +386,18 @@ pub(super) fn jitter(key: u64) -> (f64, f64) {
     )
 }
 
-/// Pixel-area average of the pattern (see the module docs for when sub-sampling is used).
-fn area_sample(g: &CornerGeometry, size: usize, s: usize) -> GrayImage {
-    // Colours of the (size+1)² pixel corners, shared by neighbouring pixels.
-    let side = size + 1;
+/// Area averages of the pattern over cells of `1/m` px, `m·size` per side (`m = 1`: the pixels;
+/// see the module docs for when sub-sampling is used).
+fn area_sample(g: &CornerGeometry, size: usize, s: usize, m: usize) -> GrayImage {
+    // Cells of 1/m px (see `blur_then_integrate`), each with about s/m sub-samples per side.
+    let (cells, s, unit) = (size * m, s.div_ceil(m), 1.0 / m as f64);
+    let at = |i: usize| (i as f64 + 0.5) * unit - 0.5;
+    // Colours of the (cells+1)² cell corners, shared by neighbouring cells.
+    let side = cells + 1;
     let mut corners = vec![false; side * side];
     for j in 0..side {
         for i in 0..side {
-            corners[j * side + i] = g.is_bright(i as f64 - 0.5, j as f64 - 0.5);
+            corners[j * side + i] = g.is_bright(i as f64 * unit - 0.5, j as f64 * unit - 0.5);
         }
     }
     // Where both edges meet, a narrow sector can slip between the five probes of a pixel.
@@ -399,13 +407,13 @@ fn area_sample(g: &CornerGeometry, size: usize, s: usize) -> GrayImage {
         .flatten()
         .filter_map(|&p| g.plane_to_image(p))
         .collect();
-    let step = 1.0 / s as f64;
+    let step = unit / s as f64;
     let bright = g.intensity as f32;
     let scale = bright / (s * s) as f32;
-    let mut data = vec![0.0f32; size * size];
-    for y in 0..size {
-        for x in 0..size {
-            let (xf, yf) = (x as f64, y as f64);
+    let mut data = vec![0.0f32; cells * cells];
+    for y in 0..cells {
+        for x in 0..cells {
+            let (xf, yf) = (at(x), at(y));
             let centre = g.is_bright(xf, yf);
             let uniform = corners[y * side + x] == centre
                 && corners[y * side + x + 1] == centre
@@ -414,7 +422,7 @@ fn area_sample(g: &CornerGeometry, size: usize, s: usize) -> GrayImage {
             let near_junction = forced
                 .iter()
                 .any(|p| (p[0] - xf).abs() <= 2.0 && (p[1] - yf).abs() <= 2.0);
-            data[y * size + x] = if uniform && !near_junction {
+            data[y * cells + x] = if uniform && !near_junction {
                 if centre {
                     bright
                 } else {
@@ -422,12 +430,12 @@ fn area_sample(g: &CornerGeometry, size: usize, s: usize) -> GrayImage {
                 }
             } else {
                 let mut count = 0u32;
-                let key = ((y * size + x) * s * s) as u64;
+                let key = ((y * cells + x) * s * s) as u64;
                 for b in 0..s {
                     for a in 0..s {
                         let (jx, jy) = jitter(key + (b * s + a) as u64);
-                        let sx = xf - 0.5 + (a as f64 + jx) * step;
-                        let sy = yf - 0.5 + (b as f64 + jy) * step;
+                        let sx = xf - 0.5 * unit + (a as f64 + jx) * step;
+                        let sy = yf - 0.5 * unit + (b as f64 + jy) * step;
                         count += g.is_bright(sx, sy) as u32;
                     }
                 }
@@ -435,7 +443,7 @@ fn area_sample(g: &CornerGeometry, size: usize, s: usize) -> GrayImage {
             };
         }
     }
-    GrayImage::from_vec(size, size, data).expect("size validated")
+    GrayImage::from_vec(cells, cells, data).expect("size validated")
 }
 
 /// The paper's four synthetic tests (section IV-A): one factor swept, the others drawn at random.

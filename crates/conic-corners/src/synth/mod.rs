@@ -109,6 +109,52 @@ pub fn gaussian_blur(image: &GrayImage, sigma: f64) -> GrayImage {
     GrayImage::from_vec(w, h, out).expect("same size as the input")
 }
 
+/// Cells per pixel side on which [`blur_then_integrate`] blurs by `sigma` (px): enough that the
+/// blur spans two cells (`m σ ≥ 2`), at most 4; 1 without blur.
+///
+/// Why cells at all: a camera's optics blur the continuous image, and then each pixel integrates
+/// it over its square. Blurring the pixels' area averages instead (integrate, then blur) differs
+/// by the aliasing of the integrated pattern, which the sampled Gaussian passes where its
+/// spectrum is not yet negligible (below a third of a cycle per pixel at σ = 1). At σ = 1.16 px
+/// that put 0.3 % of the contrast (RMS, 1.2 % at the most) into the pixels around an
+/// X-junction, depending on its sub-pixel phase, and a model of the blurred junction fitted to
+/// them was 0.012 px off. On cells of a half pixel or less the blur's spectrum is negligible
+/// there.
+pub(crate) fn blur_cells(sigma: f64) -> usize {
+    if sigma.is_nan() || sigma <= 0.0 {
+        1
+    } else {
+        (2.0 / sigma).ceil().clamp(1.0, 4.0) as usize
+    }
+}
+
+/// The image a camera records of a pattern whose area averages over cells of `1/m` px are
+/// `cells` (`m·w × m·h`, cell `(X, Y)` covering `[X/m − ½, (X+1)/m − ½] × [Y/m − ½, (Y+1)/m − ½]`
+/// in pixel coordinates): blurred by a Gaussian of `sigma` px ([`gaussian_blur`] of `m·σ` cells),
+/// then each pixel the mean of its `m × m` cells. `m = 1` is [`gaussian_blur`].
+pub(crate) fn blur_then_integrate(cells: &GrayImage, m: usize, sigma: f64) -> GrayImage {
+    let blurred = gaussian_blur(cells, sigma * m as f64);
+    if m <= 1 {
+        return blurred;
+    }
+    let (w, h) = (cells.width() / m, cells.height() / m);
+    let src = blurred.data();
+    let inv = 1.0 / (m * m) as f32;
+    let mut out = vec![0.0f32; w * h];
+    for (y, row) in out.chunks_mut(w).enumerate() {
+        for j in 0..m {
+            let line = &src[(y * m + j) * cells.width()..][..w * m];
+            for (o, cell) in row.iter_mut().zip(line.chunks_exact(m)) {
+                *o += cell.iter().sum::<f32>();
+            }
+        }
+        for o in row.iter_mut() {
+            *o *= inv;
+        }
+    }
+    GrayImage::from_vec(w, h, out).expect("whole pixels")
+}
+
 /// Adds independent Gaussian noise `N(0, sigma²)` to every pixel, drawn from `rng` in row-major
 /// order (so a seeded generator gives the same noise on every machine). Values are not clamped.
 /// `sigma ≤ 0` or not finite leaves the image unchanged and draws nothing.
