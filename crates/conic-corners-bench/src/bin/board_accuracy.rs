@@ -4,8 +4,9 @@
 //! 45–200 mm, log-uniform, convex or concave), elliptic columns and S-shaped surfaces (two opposite
 //! arcs), plus flat ones (pair `i` takes them in turn by `i mod 5`), in random poses in front of a
 //! fixed stereo rig with radial distortion, moderate blur (σ ∈ [0.7, 1.2] px), noise
-//! (σ ∈ [0.5, 1] % of the 0..1 range), uneven light and optional occluders; edge pixels are
-//! area-sampled with [`SUPERSAMPLE`]² sub-samples. Saves each view as the 8-bit PNG every method
+//! (σ ∈ [0.5, 1] % of the 0..1 range), uneven light and optional occluders; edge cells are
+//! area-sampled with [`SUPERSAMPLE`]² sub-samples per pixel, blurred, and then integrated over each
+//! pixel, as a camera does ([`conic_corners::synth::BoardScene::render`]). Saves each view as the 8-bit PNG every method
 //! reads, and runs conic-corners on exactly those pixels, once per [`RefineMode`].
 //!
 //! **Rig.** Both cameras are 1920×1200 pinholes with their own intrinsics and two-term radial
