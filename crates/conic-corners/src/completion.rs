@@ -22,9 +22,9 @@
 //! least [`LabelParams::min_corners`](crate::connectivity::LabelParams) corners over two rows
 //! and columns are kept as boards (the corners of the others
 //! are then free for the completion of the board they belong to). A corner whose correlation is
-//! decided but below [`ON_LATTICE`] is dropped in the same way (its labelled neighbours are not
+//! decided but below `ON_LATTICE` is dropped in the same way (its labelled neighbours are not
 //! the ones its edges lead to), and so is a piece whose median correlation is below
-//! [`TYPICAL_ON_LATTICE`]. Where a board's squares are foreshortened to a few pixels or to thin
+//! `TYPICAL_ON_LATTICE`. Where a board's squares are foreshortened to a few pixels or to thin
 //! rhombi (a board seen nearly edge-on), the election's edge angles fail and the connectivity
 //! can link corners two rows apart: a sheared lattice whose phase is consistent, but whose
 //! corners correlate by 0.3–0.72 in its frame. True corners correlate by at least 0.71, and
@@ -550,7 +550,7 @@ fn reference(image: &GrayImage, grid: &Grid, labels: &[Label]) -> Option<Referen
 /// of its length, clear of the dots at their centres. A quarter of the length reached a
 /// foreshortened square's dot on `curve_7.jpg`.
 const EDGE_REACH: f64 = 1.0 / 6.0;
-/// Sample distances per side in [`edge_seen`], evenly spaced up to [`EDGE_REACH`].
+/// Sample distances per side in [`edge_seen`], evenly spaced up to `EDGE_REACH`.
 const EDGE_SIDE_SAMPLES: usize = 4;
 /// Smallest contrast across the middle of a link in [`edge_seen`], as a fraction of the smaller
 /// one near its ends: under a pen or a finger there is next to none.
@@ -558,10 +558,10 @@ const EDGE_MIDDLE_CONTRAST: f64 = 0.35;
 
 /// Whether the image shows one edge along the segment from `a` to `b` (image coordinates), as
 /// between two neighbouring corners of a checkerboard. Across the segment at a point `c` of
-/// it, the differences `I(c + r n) − I(c − r n)` are taken at [`EDGE_SIDE_SAMPLES`] distances `r`
-/// up to [`EDGE_REACH`] of its length (`n` its unit normal). Near both ends (at 20 % and 80 % of
+/// it, the differences `I(c + r n) − I(c − r n)` are taken at `EDGE_SIDE_SAMPLES` distances `r`
+/// up to `EDGE_REACH` of its length (`n` its unit normal). Near both ends (at 20 % and 80 % of
 /// the length) the difference largest in magnitude must have one sign; in the middle (35, 50 and
-/// 65 %) the largest difference of that sign must reach [`EDGE_MIDDLE_CONTRAST`] of the smaller
+/// 65 %) the largest difference of that sign must reach `EDGE_MIDDLE_CONTRAST` of the smaller
 /// end's magnitude, at all three (with two of three, the noisy half-size copy of `curve_4.jpg`
 /// kept a corner labelled one row and one column off, as without this check). The largest
 /// difference, not a mean: the square beside the edge may be a sliver a few pixels wide at a
@@ -614,15 +614,15 @@ const PHASE_DECIDED: f64 = 0.3;
 /// for the corners it adds ([`CompletionParams::min_ncc`]'s default).
 const ON_LATTICE: f64 = 0.7;
 
-/// Smallest median correlation (as [`ON_LATTICE`]) of a board's corners. A sheared lattice's
-/// corners correlate by 0.6–0.72 in its frame, and some pass [`ON_LATTICE`]; a board's median
+/// Smallest median correlation (as `ON_LATTICE`) of a board's corners. A sheared lattice's
+/// corners correlate by 0.6–0.72 in its frame, and some pass `ON_LATTICE`; a board's median
 /// is at least 0.93 on the photos, the robustness report and the curved-board benchmark, where
 /// 20 of 43 400 corners correlate by less than 0.8.
 const TYPICAL_ON_LATTICE: f64 = 0.8;
 
 /// Checks the labels of every board against the checker pattern (first step of the rule in the
 /// [module docs](self)). A board where every measured corner agrees, each by at least
-/// [`ON_LATTICE`], is left alone. Otherwise the corners below it are dropped, the others grouped
+/// `ON_LATTICE`, is left alone. Otherwise the corners below it are dropped, the others grouped
 /// by phase (the undecided ones join the group of most of their decided 4-neighbours, at least
 /// two of them), each
 /// group is split into pieces connected by label steps of one, and each piece with at least
@@ -663,7 +663,7 @@ fn phase_ncc(image: &GrayImage, corners: &[Corner], board: &Board) -> Vec<Option
 /// The phase of a board (`board.corners` index `corners`): whether its corners labelled with an
 /// even `row + col` correlate positively with the junction of phase +1 (the sign that
 /// [`split_by_phase`] checks), by a majority of the corners decided by at least
-/// [`PHASE_DECIDED`]. `None` when no corner is decided, or as many are of either sign.
+/// `PHASE_DECIDED`. `None` when no corner is decided, or as many are of either sign.
 pub fn board_phase(image: &GrayImage, corners: &[Corner], board: &Board) -> Option<bool> {
     if board.corners.iter().any(|&i| i >= corners.len()) {
         return None;

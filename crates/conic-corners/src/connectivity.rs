@@ -19,7 +19,7 @@
 //!    disagrees is not the same grid).
 //! 3. **Nearest per ray, mutual.** Each ray keeps its nearest admissible candidate (so at most one
 //!    neighbour per side, at most two per family), unless that one lies more than `theta_edge / 2`
-//!    off the ray and another admissible candidate at most [`ALIGNED_REACH`] times farther lies
+//!    off the ray and another admissible candidate at most `ALIGNED_REACH` times farther lies
 //!    less than half as far off it (sines of the angles): in a cell foreshortened to a quarter of
 //!    its length the short diagonal is both nearer than the grid neighbour and within
 //!    `theta_edge` of the long side. The link `i — j` is kept only if `j` also chose `i` on one of
@@ -726,7 +726,7 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// [`label_with`]'s.
 ///
 /// At every corner of a board with a labelled predecessor along a grid axis but no successor,
-/// the grid line is extrapolated `k = 1 …` [`MAX_BRIDGE_STEPS`] steps with the last step
+/// the grid line is extrapolated `k = 1 …` `MAX_BRIDGE_STEPS` steps with the last step
 /// `p_i − p_prev`. If a corner of another board lies within the tolerance of a prediction (the
 /// first one that hits anything), and that board's own step there along the same axis agrees with
 /// the extrapolated step (within 30 % of the step), it votes for merging that board with the label
@@ -736,15 +736,15 @@ fn cell_skew(p: [(f64, f64); 4]) -> f64 {
 /// once in one orientation: each board is first turned by the quarter turns that best align its
 /// label steps with the largest board's (canonical orientations may differ on a board at 45°),
 /// and turned back at the end. A hit at the next site (`k = 1`)
-/// whose steps disagree, or up to [`TURN_REACH`] steps from the prediction, still votes when the
-/// far piece's steps there are within [`TURN_STEP_RATIO`] of the extrapolated one, the
+/// whose steps disagree, or up to `TURN_REACH` steps from the prediction, still votes when the
+/// far piece's steps there are within `TURN_STEP_RATIO` of the extrapolated one, the
 /// neighbouring grid line also hits the same board at its next site with the same offset, and the
 /// cell the two links span across the gap is no more skewed than [`connect`] lets a supporting
 /// cell be (`max_cell_skew` of the default [`ConnectivityParams`]): a grid line turning sharply
 /// where a bent board folds away from the camera. A board is merged into another when at least
-/// [`MIN_BRIDGE_VOTES`] grid lines agree, no label would be taken twice, the two boards'
+/// `MIN_BRIDGE_VOTES` grid lines agree, no label would be taken twice, the two boards'
 /// phases (`phase`, see [`crate::completion::board_phase`]; `None` where unknown) agree across
-/// the offset, and no other offset between the same two boards has [`MIN_BRIDGE_VOTES`] votes
+/// the offset, and no other offset between the same two boards has `MIN_BRIDGE_VOTES` votes
 /// (counted from both boards) and either as many as this one or a merge of its own (no label
 /// taken twice, phases agreeing). The last guard is for a fold seen at a low resolution: its
 /// narrowest columns are missed, the lines from either side extrapolate across the gap with

@@ -36,16 +36,19 @@
 //! radius, safeguarded by bisection, to machine precision), cast as a ray into the board frame and
 //! intersected with the surface in closed form (a line, a circle, an ellipse, or two circles); the
 //! nearest hit on the sheet gives the colour, a hit on the back of the sheet or no hit gives the
-//! background. A pixel takes its centre's colour when its centre and four corners see the same region
-//! (the same square and dot state, margin or background), and no occluder edge passes within 0.75
-//! px of its centre; otherwise it averages `s × s` jittered sub-samples, with the jitter of
+//! background. The image is area-sampled on cells of `1/m` px (`m` from `blur_cells`: one
+//! cell per pixel without blur or at σ ≥ 2 px, up to 4 per side at small blur). A cell takes its
+//! centre's colour when its centre and four corners see the same region (the same square and dot
+//! state, margin or background), and no occluder edge passes within 0.75 cell of its centre;
+//! otherwise it averages about `s/m × s/m` jittered sub-samples, with the jitter of
 //! [`corner`](super::corner) (deterministic, unbiased along edges). Regions are convex on the sheet,
 //! so only features narrower than half a pixel in the image (dots, far squares) can slip between the
 //! five probes. Occluders ([`Occluder`]: opaque bars with round ends, in image coordinates) are drawn
 //! over the projected board, before the lighting gain, blur and noise, like objects in the scene.
 //! Then the lighting gain `1 + g_x (x − x̄)/width + g_y (y − ȳ)/height` (`x̄, ȳ` the image centre)
-//! multiplies every pixel, the Gaussian blur is applied and Gaussian noise is added from a seeded
-//! ChaCha8 generator. The gain does not move edges of the sharp image; after blur it shifts an edge
+//! multiplies every cell, the Gaussian blur is applied to the cells, each pixel takes the mean of
+//! its `m × m` cells (the blur comes first, as in a camera: `blur_then_integrate`), and
+//! Gaussian noise is added from a seeded ChaCha8 generator. The gain does not move edges of the sharp image; after blur it shifts an edge
 //! by about `σ² |∇gain|/gain`, i.e. < 10⁻³ px for realistic gradients, which the truth ignores.
 //!
 //! **Truth.** Corner positions are forward projections of the exact surface points. A corner is
@@ -1122,7 +1125,7 @@ impl BoardScene {
 
     /// Renders the scene (area sampling, occluders and lighting on cells of `1/m` px, blur, each
     /// pixel the mean of its cells, then noise drawn from `ChaCha8Rng::seed_from_u64(seed)`; see
-    /// [`super::blur_then_integrate`] for why the blur comes first) with the truth of every
+    /// `blur_then_integrate` for why the blur comes first) with the truth of every
     /// corner.
     pub fn render(&self, seed: u64) -> Result<RenderedBoard, SynthError> {
         let g = self.geometry()?;

@@ -32,8 +32,8 @@
 //! at most `0.5/s^1.5` of the contrast per edge pixel, which averages out along the edge. An edge on
 //! a cell boundary (e.g. a quarter-pixel offset with `s` a multiple of 4) is still sampled exactly.
 //! The blur comes before the pixels, as in a camera: the pattern is area-sampled on cells of
-//! `1/m` px (`m` from [`super::blur_cells`]: the blur spans two cells), blurred there, and each
-//! pixel averages its `m × m` cells ([`super::blur_then_integrate`]). Then white Gaussian noise
+//! `1/m` px (`m` from `blur_cells`: the blur spans two cells), blurred there, and each
+//! pixel averages its `m × m` cells (`blur_then_integrate`). Then white Gaussian noise
 //! from a seeded ChaCha8 generator.
 
 use super::{add_gaussian_noise, blur_cells, blur_then_integrate, SynthError};

@@ -1,11 +1,12 @@
 //! Synthetic test images with exact ground truth, and the Cramér–Rao bound they are judged against.
 //!
 //! [`corner`] renders the paper's single-corner protocol (section IV-A): an X-junction of two
-//! circular-arc edges on a plane seen by a pinhole camera, area-sampled, blurred and made noisy, with
-//! the corner's image position known exactly. [`board`] renders whole checkerboards, flat or bent
-//! around cylinders, elliptic columns and S shapes, with the truth of every inner corner.
-//! [`Protocol`] holds the paper's four sweeps (noise,
-//! blur, perspective, curvature) and [`scene_for`] draws the other factors as the paper does.
+//! circular-arc edges on a plane seen by a pinhole camera, blurred, integrated over each pixel (the
+//! blur comes first, as in a camera) and made noisy, with the corner's image position known
+//! exactly. [`board`] renders whole checkerboards, flat or bent around cylinders, elliptic columns
+//! and S shapes, with the truth of every inner corner. [`Protocol`] holds the paper's four sweeps
+//! (noise, blur, perspective, curvature) and [`scene_for`] draws the other factors as the paper
+//! does.
 //!
 //! All coordinates are image coordinates: x right, y down, the centre of the top-left pixel at
 //! (0, 0), pixel `(i, j)` covering `[i − ½, i + ½] × [j − ½, j + ½]`. Intensities are on a full
