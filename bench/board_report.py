@@ -34,12 +34,17 @@ used.
    the board's centre along the optical axis of the left camera (mm; like the paper's pen tip,
    it amplifies the rotation error), and the tip error's ratio to libcbdetect's on the views both
    solved. Methods that report a sigma per corner are also solved with each corner weighted by
-   1/sigma^2 (what a user of the uncertainty would do).
+   1/sigma^2 (what a user of the uncertainty would do), and those that report a 2x2 covariance
+   with each corner's two residuals whitened by it (weighted by the inverse covariance).
 6. Calibration of the sigma (conic-corners-board): share of corners whose error is
    within 1, 2, 3 sigma (sigma = std. dev. in the worst direction; for an isotropic 2-D Gaussian the
    shares would be 39.3 %, 86.5 %, 98.9 %), over the corners that carry a sigma; and per axis, the
    share of the errors' x and y components within 1 and 2 sigma (a 1-D Gaussian: 68.3 %, 95.4 %;
-   sigma being the worst direction's, an honest one gives at least these shares).
+   sigma being the worst direction's, an honest one gives at least these shares). Where a method
+   reports a covariance C per corner: the share of corners whose Mahalanobis distance
+   d = sqrt(e' C^-1 e) is within 1, 2, 3 (a 2-D Gaussian: 39.3 %, 86.5 %, 98.9 %), the mean of d^2
+   (2 for a 2-D Gaussian), and per axis, the share of the x and y components within 1 and 2 of
+   their own standard deviations sqrt(C_xx), sqrt(C_yy) (a 1-D Gaussian: 68.3 %, 95.4 %).
 7. Edge-information bound: for every visible true corner, the smallest RMS error (px) that an
    unbiased estimator fitting each of its two grid lines from that line's edge pixels can reach
    (Cramer-Rao). Each line is a step edge of contrast (white - black) x lighting gain, blurred by
@@ -174,19 +179,30 @@ def rodrigues(w):
 
 def solve_pnp(X, uv, cam, R0, t0, w=None):
     """Pose (R, t) mapping the left-camera-frame points X into the view minimizing the pixel
-    reprojection error of uv (each point's two residuals weighted by sqrt(w) if given):
-    Gauss-Newton on a rotation-vector update, started at (R0, t0)."""
+    reprojection error of uv (each point's two residuals weighted by sqrt(w) if w is N weights,
+    whitened by the 2x2 covariances if w is N x 2 x 2): Gauss-Newton on a rotation-vector update,
+    started at (R0, t0)."""
     R, t = np.asarray(R0, float), np.asarray(t0, float)
-    sw = np.ones(2 * len(X)) if w is None else np.repeat(np.sqrt(np.asarray(w, float)), 2)
+    if w is None:
+        white = np.broadcast_to(np.eye(2), (len(X), 2, 2))
+    elif np.ndim(w) == 1:
+        white = np.sqrt(np.asarray(w, float))[:, None, None] * np.eye(2)
+    else:
+        # L with L' L = C^-1: the transposed Cholesky factor of the inverse covariance.
+        white = np.transpose(np.linalg.cholesky(np.linalg.inv(np.asarray(w, float))), (0, 2, 1))
+
+    def residual(R, t):
+        return np.einsum("nij,nj->ni", white, project(X, cam, R, t) - uv).ravel()
+
     for _ in range(10):
-        r0 = (project(X, cam, R, t) - uv).ravel() * sw
+        r0 = residual(R, t)
         J = np.empty((len(r0), 6))
         for k in range(6):
             h = 1e-7
             d = np.zeros(6)
             d[k] = h
             Rk, tk = rodrigues(d[:3]) @ R, t + d[3:]
-            J[:, k] = ((project(X, cam, Rk, tk) - uv).ravel() * sw - r0) / h
+            J[:, k] = (residual(Rk, tk) - r0) / h
         step = np.linalg.lstsq(J, -r0, rcond=None)[0]
         R, t = rodrigues(step[:3]) @ R, t + step[3:]
         if np.linalg.norm(step) < 1e-12:
@@ -209,7 +225,12 @@ def summarize(root, match_px):
     for r in dets:
         pts = np.array([c[:2] for c in r["corners"]], dtype=np.float64).reshape(-1, 2)
         sig = np.array([c[2] if len(c) > 2 and c[2] is not None else np.nan for c in r["corners"]])
-        found[(r["image"], r["method"])] = (pts, sig)
+        # Covariance [[xx, xy], [xy, yy]] (px^2) where the method reports one, else NaN.
+        cov = np.full((len(r["corners"]), 2, 2), np.nan)
+        for i, c in enumerate(r["corners"]):
+            if len(c) > 5 and None not in c[3:6]:
+                cov[i] = [[c[3], c[4]], [c[4], c[5]]]
+        found[(r["image"], r["method"])] = (pts, sig, cov)
         if isinstance(r.get("ms"), (int, float)):
             ms[r["method"]].append(r["ms"])
         if r.get("error"):
@@ -218,11 +239,13 @@ def summarize(root, match_px):
     methods = [m for m in OURS_ORDER + PEER_ORDER if m in present]
     methods += sorted(present - set(methods))
 
-    per = {m: [] for m in methods}  # (err, bin, kind, sigma, (image, (row, col)))
+    # (err, bin, kind, sigma, (image, (row, col)), dx, dy, covariance)
+    per = {m: [] for m in methods}
     visible = 0
     stereo = {m: {"res": [], "res_bin": defaultdict(list), "e3": [], "keys": {}} for m in methods}
     # name -> (pair, side) -> (rotation deg, translation mm, tip mm); methods with a sigma also
-    # get a "(sigma-weighted)" entry, each corner weighted by 1/sigma^2.
+    # get a "(sigma-weighted)" entry, each corner weighted by 1/sigma^2, and methods with a
+    # covariance a "(covariance-weighted)" one.
     pnp = defaultdict(dict)
     for t in truth:
         kind = t["surface"]["kind"]
@@ -233,14 +256,15 @@ def summarize(root, match_px):
         for m in methods:
             matched[m] = {}
             for side, v in views.items():
-                pts, sig = found.get((v["image"], m), (np.zeros((0, 2)), np.zeros(0)))
+                pts, sig, cov = found.get((v["image"], m),
+                                          (np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2, 2))))
                 mm = match(v, pts, match_px)
                 matched[m][side] = mm
                 kap = {(c["row"], c["col"]): max(abs(c["curvature"][0]), abs(c["curvature"][1]))
                        for c in v["corners"]}
                 for key, (dx, dy, j) in mm.items():
                     per[m].append((math.hypot(dx, dy), curvature_bin(kap[key]), kind, sig[j],
-                                   (v["image"], key), dx, dy))
+                                   (v["image"], key), dx, dy, cov[j]))
         # Stereo.
         cam_l, cam_r = views["L"]["camera"], views["R"]["camera"]
         cols = t["cols"]
@@ -263,13 +287,21 @@ def summarize(root, match_px):
                 uv = np.array([[tv[k]["x"] + mm[k][0], tv[k]["y"] + mm[k][1]] for k in keys])
                 X = np.array([t["points3d"][r * cols + c] for r, c in keys])
                 R0, t0 = poses[side]
-                sig = found.get((v["image"], m), (None, np.zeros(0)))[1]
+                _, sig, cov = found.get((v["image"], m), (None, np.zeros(0), np.zeros((0, 2, 2))))
                 s_k = np.array([sig[mm[k][2]] for k in keys])
                 variants = [(m, None)]
                 if np.isfinite(s_k).any():
                     # Corners without a sigma (failed refinement) get the worst one.
                     s_k = np.where(np.isfinite(s_k), s_k, np.nanmax(s_k))
                     variants.append((m + " (sigma-weighted)", 1.0 / np.maximum(s_k, 1e-3) ** 2))
+                c_k = np.array([cov[mm[k][2]] for k in keys]).reshape(-1, 2, 2)
+                has = np.isfinite(c_k).all(axis=(1, 2))
+                if has.any():
+                    # Without a covariance: the worst sigma's, isotropic. Each covariance gets
+                    # the 1e-3 px floor of the sigma weights on its diagonal.
+                    worst = np.nanmax(s_k) ** 2 * np.eye(2)
+                    c_k = np.where(has[:, None, None], c_k, worst) + 1e-6 * np.eye(2)
+                    variants.append((m + " (covariance-weighted)", c_k))
                 for name, w in variants:
                     R, tt = solve_pnp(X, uv, v["camera"], R0, t0, w)
                     cos = (np.trace(R @ R0.T) - 1) / 2
@@ -494,7 +526,8 @@ def tables(root, match_px):
     head = ["method", "views", "rotation RMS deg", "rotation median deg", "translation RMS mm",
             "tip RMS mm", "tip median mm", f"tip / {REFERENCE} (shared views)"]
     body = []
-    for m in [n for m in methods for n in (m, m + " (sigma-weighted)") if n in pnp]:
+    weightings = ("", " (sigma-weighted)", " (covariance-weighted)")
+    for m in [n for m in methods for n in (m + w for w in weightings) if n in pnp]:
         v = pnp[m]
         e = np.array(list(v.values()))
         shared = [k for k in v if k in ref]
@@ -526,6 +559,25 @@ def tables(root, match_px):
                     + ", ".join(f"{g:.1%}" for g in GAUSS_2D) + ", RMS err/sigma 1.41; per axis,"
                     " |dx| and |dy| against sigma, a 1-D Gaussian: 68.3%, 95.4%)",
                     head, body))
+
+    head = ["method", "corners with covariance", "d within 1", "2", "3", "mean d^2",
+            "per axis within 1 own sigma", "2 own sigmas"]
+    body = []
+    for m in methods:
+        rows = [(x[5], x[6], x[7]) for x in per[m] if np.isfinite(x[7]).all()]
+        if not rows:
+            continue
+        e = np.array([[dx, dy] for dx, dy, _ in rows])
+        c = np.array([cv for _, _, cv in rows])
+        d2 = np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e)
+        axes = np.abs(e) / np.sqrt(np.stack([c[:, 0, 0], c[:, 1, 1]], axis=1))
+        body.append([m, str(len(rows)), *[f"{np.mean(d2 <= k * k):.1%}" for k in (1, 2, 3)],
+                     f"{float(np.mean(d2)):.2f}", *[f"{np.mean(axes <= k):.1%}" for k in (1, 2)]])
+    if body:
+        out.append(("Reported covariance against the actual error: Mahalanobis distance d (a 2-D "
+                    "Gaussian: " + ", ".join(f"{g:.1%}" for g in GAUSS_2D) + ", mean d^2 2.00); "
+                    "per axis, |dx| / sqrt(C_xx) and |dy| / sqrt(C_yy) (a 1-D Gaussian: 68.3%, "
+                    "95.4%)", head, body))
 
     out += bound_tables(root, per, methods)
 
@@ -576,7 +628,7 @@ def selftest(root):
         worst_px = max(worst_px, float(np.abs(res).max()))
         worst_mm = max(worst_mm, float(np.linalg.norm(X - X_true, axis=1).max()))
         n += len(both)
-    worst_deg = worst_tip = 0.0
+    worst_deg = worst_tip = worst_white = 0.0
     for t in read_jsonl(os.path.join(root, "truth.jsonl")):
         poses = {"L": (np.eye(3), np.zeros(3)),
                  "R": (np.asarray(t["rig"]["R"]), np.asarray(t["rig"]["t"]))}
@@ -588,8 +640,13 @@ def selftest(root):
             X = np.array([t["points3d"][c["row"] * t["cols"] + c["col"]] for c in vis])
             uv = np.array([[c["x"], c["y"]] for c in vis])
             R0, t0 = poses[side]
-            R, tt = solve_pnp(X, uv, v["camera"], rodrigues([0.03, -0.02, 0.05]) @ R0,
-                              t0 + np.array([4.0, -3.0, 6.0]))
+            start = (rodrigues([0.03, -0.02, 0.05]) @ R0, t0 + np.array([4.0, -3.0, 6.0]))
+            R, tt = solve_pnp(X, uv, v["camera"], *start)
+            # On exact corners any whitening reaches the same (exact) pose.
+            Rc, tc = solve_pnp(X, uv, v["camera"], *start,
+                               np.broadcast_to([[4.0, 1.0], [1.0, 2.0]], (len(X), 2, 2)))
+            worst_white = max(worst_white, float(np.abs(Rc - R).max()),
+                              float(np.abs(tc - tt).max()))
             cos = (np.trace(R @ R0.T) - 1) / 2
             worst_deg = max(worst_deg, math.degrees(math.acos(max(-1.0, min(1.0, cos)))))
             worst_tip = max(worst_tip, float(np.linalg.norm(R @ tip + tt - (R0 @ tip + t0))))
@@ -607,10 +664,11 @@ def selftest(root):
     bound_ok = (abs(line_var / (9 / (4 * 160)) - 1) < 0.02
                 and abs(corner ** 2 / (2 * line_var) - 1) < 1e-9)
     ok = (n > 0 and worst_px < 1e-6 and worst_mm < 1e-6 and worst_deg < 1e-4
-          and worst_tip < 1e-4 and bound_ok)
+          and worst_tip < 1e-4 and worst_white < 1e-6 and bound_ok)
     print(f"selftest: {n} true corners triangulated, worst reprojection {worst_px:.2e} px, "
           f"worst 3-D error {worst_mm:.2e} mm; poses from the exact corners: worst rotation "
-          f"{worst_deg:.2e} deg, worst tip {worst_tip:.2e} mm; edge-information bound of a "
+          f"{worst_deg:.2e} deg, worst tip {worst_tip:.2e} mm (whitened by a covariance: "
+          f"{worst_white:.1e} from the unweighted pose); edge-information bound of a "
           f"straight 160 px edge {line_var:.5f} (9/640 = {9 / 640:.5f}), of a right-angle "
           f"corner {corner ** 2:.5f}: {'OK' if ok else 'FAILED'}")
     return 0 if ok else 1

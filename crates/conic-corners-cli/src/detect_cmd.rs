@@ -40,7 +40,8 @@ pub struct DetectArgs {
     /// model (path `junction`), failing that the gradient estimate (path `gradient`).
     #[arg(long = "refine", value_name = "MODE", default_value = "board", value_parser = ["local", "board"])]
     mode: String,
-    /// Print CSV rows (image,board,row,col,x,y,score,status,path,sigma) instead of JSON.
+    /// Print CSV rows (image,board,row,col,x,y,score,status,path,sigma,cov_xx,cov_xy,cov_yy)
+    /// instead of JSON.
     #[arg(long)]
     csv: bool,
     #[command(flatten)]
@@ -88,7 +89,7 @@ pub fn detection_json(path: &Path, image: &GrayImage, det: &Detection) -> serde_
                     json!({
                         "x": c.x, "y": c.y, "row": c.row, "col": c.col, "score": c.score,
                         "status": c.status, "residual": c.residual, "path": c.path,
-                        "sigma": c.sigma,
+                        "sigma": c.sigma, "cov": c.cov,
                     })
                 })
                 .collect();
@@ -108,10 +109,13 @@ fn csv_rows(path: &Path, det: &Detection) -> String {
         for c in &b.corners {
             let status = serde_json::to_value(c.status).expect("status serializes");
             let how = serde_json::to_value(c.path).expect("path serializes");
-            // An empty sigma field where the corner has none (refinement failed).
+            // Empty sigma and covariance fields where the corner has none (refinement failed).
             let sigma = c.sigma.map_or(String::new(), |v| format!("{v:.6}"));
+            let cov = c.cov.map_or(",,".to_string(), |m| {
+                format!("{:.6e},{:.6e},{:.6e}", m[0][0], m[0][1], m[1][1])
+            });
             out.push_str(&format!(
-                "{},{bi},{},{},{:.6},{:.6},{:.4},{},{},{sigma}\n",
+                "{},{bi},{},{},{:.6},{:.6},{:.4},{},{},{sigma},{cov}\n",
                 csv_field(&path.display().to_string()),
                 c.row,
                 c.col,
@@ -188,7 +192,7 @@ pub fn run(args: &DetectArgs) -> Result<(), String> {
         bar
     });
     if args.csv {
-        println!("image,board,row,col,x,y,score,status,path,sigma");
+        println!("image,board,row,col,x,y,score,status,path,sigma,cov_xx,cov_xy,cov_yy");
     }
     // Results are printed in input order as soon as every earlier image is done.
     let next = Mutex::new((

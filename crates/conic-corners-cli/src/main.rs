@@ -98,6 +98,7 @@ struct CornerOut {
     status: conic_corners::refine::Status,
     residual: Option<f64>,
     sigma: Option<f64>,
+    cov: Option<[[f64; 2]; 2]>,
 }
 
 impl From<Refined> for CornerOut {
@@ -108,6 +109,7 @@ impl From<Refined> for CornerOut {
             status: r.status,
             residual: r.residual,
             sigma: r.sigma,
+            cov: r.cov,
         }
     }
 }

@@ -242,6 +242,8 @@ fn colour_and_sixteen_bit_images_are_read_as_grey() {
             .as_f64()
             .expect("a converged corner has a sigma");
         assert!(sigma > 0.0 && sigma < 0.1, "{sigma}");
+        let var_x = v["corners"][0]["cov"][0][0].as_f64().expect("a covariance");
+        assert!(var_x > 0.0 && var_x <= sigma * sigma * (1.0 + 1e-9), "{var_x}");
         assert!((v["corners"][0]["x"].as_f64().unwrap() - 100.3).abs() < 0.05);
     }
 }
@@ -318,17 +320,23 @@ fn detect_finds_and_labels_a_rendered_board() {
         .unwrap();
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
-    assert!(text.starts_with("image,board,row,col,x,y,score,status,path,sigma\n"));
+    assert!(text.starts_with(
+        "image,board,row,col,x,y,score,status,path,sigma,cov_xx,cov_xy,cov_yy\n"
+    ));
     assert_eq!(text.lines().count(), 1 + truth.len());
     for row in text.lines().skip(1) {
         let f: Vec<&str> = row.split(',').collect();
-        assert_eq!(f.len(), 10, "{row}");
+        assert_eq!(f.len(), 13, "{row}");
         assert!(
             ["board", "local", "junction", "gradient"].contains(&f[8]),
             "{row}"
         );
         let sigma: f64 = f[9].parse().expect("a placed corner has a sigma");
         assert!(sigma > 0.0 && sigma < 1.0, "{row}");
+        // σ is the worst direction's: no variance along an axis exceeds σ² (σ printed to 1e-6).
+        let cov: Vec<f64> = f[10..].iter().map(|v| v.parse().expect("covariance")).collect();
+        assert!(cov[0] > 0.0 && cov[2] > 0.0, "{row}");
+        assert!(cov[0].max(cov[2]) <= (sigma + 5e-7).powi(2), "{row}");
     }
 }
 
@@ -446,6 +454,10 @@ fn detect_board_mode_reports_paths_and_draws_the_curves() {
         if c["path"] == "board" {
             assert!(c["sigma"].as_f64().unwrap() > 0.0);
         }
+        // The covariance, `[[xx, xy], [xy, yy]]` in px², wherever there is a σ.
+        let cov = &c["cov"];
+        assert_eq!(cov[0][1], cov[1][0], "{c}");
+        assert!(cov[0][0].as_f64().unwrap() > 0.0 && cov[1][1].as_f64().unwrap() > 0.0);
     }
     assert!(v["timing_ms"]["board_fit"].as_f64().is_some());
     assert!(image::open(&overlay).is_ok());

@@ -15,7 +15,7 @@ use conic_corners::board_fit::Path;
 use conic_corners::detect::{detect as detect_rs, DetectParams, RefineMode};
 use conic_corners::refine::{refine as refine_rs, RefineParams, Status};
 use conic_corners::GrayImage;
-use numpy::ndarray::{Array1, Array2};
+use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{
     Element, IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
     PyUntypedArrayMethods,
@@ -237,7 +237,8 @@ fn refine_params(
 /// Returns one dict per board, largest first, with keys `rows`, `cols`, `points` (N×2 float64,
 /// x then y), `ids` (N×2 int32, row then col), `scores` (N float64), `status` (N uint8: 0 failed,
 /// 1 fallback, 2 converged), `residuals` (N float64, NaN where not refined), `paths` (N uint8:
-/// 0 local, 1 board) and `sigmas` (N float64, NaN where placed by the local refiner).
+/// 0 local, 1 board), `sigmas` (N float64, NaN where refinement failed) and `covariances`
+/// (N×2×2 float64, px², NaN where refinement failed).
 ///
 /// `refine` is `"board"` (board-wide curve fitting, the default) or `"local"`.
 #[pyfunction]
@@ -295,6 +296,7 @@ fn detect<'py>(
             let mut residuals = Array1::<f64>::zeros(n);
             let mut paths = Array1::<u8>::zeros(n);
             let mut sigmas = Array1::<f64>::zeros(n);
+            let mut covariances = Array3::<f64>::from_elem((n, 2, 2), f64::NAN);
             for (i, c) in board.corners.iter().enumerate() {
                 points[[i, 0]] = c.x;
                 points[[i, 1]] = c.y;
@@ -305,6 +307,13 @@ fn detect<'py>(
                 residuals[i] = c.residual.unwrap_or(f64::NAN);
                 paths[i] = path_code(c.path);
                 sigmas[i] = c.sigma.unwrap_or(f64::NAN);
+                if let Some(cov) = c.cov {
+                    for (r, row) in cov.iter().enumerate() {
+                        for (k, v) in row.iter().enumerate() {
+                            covariances[[i, r, k]] = *v;
+                        }
+                    }
+                }
             }
             let d = PyDict::new(py);
             d.set_item("rows", board.rows)?;
@@ -316,6 +325,7 @@ fn detect<'py>(
             d.set_item("residuals", residuals.into_pyarray(py))?;
             d.set_item("paths", paths.into_pyarray(py))?;
             d.set_item("sigmas", sigmas.into_pyarray(py))?;
+            d.set_item("covariances", covariances.into_pyarray(py))?;
             Ok(d)
         })
         .collect()

@@ -121,6 +121,21 @@ def test_sigma_predicts_the_error(detections):
     assert np.median(ratios) > 0.1, np.median(ratios)
 
 
+def test_covariances_go_with_sigmas(detections):
+    """Each covariance is symmetric and positive definite, and its larger eigenvalue is the
+    corner's sigma squared, in both modes."""
+    for name, _, local, fitted in detections:
+        for board in (local, fitted):
+            c = board.covariances
+            assert c.shape == (len(board), 2, 2) and c.dtype == np.float64, name
+            placed = np.isfinite(board.sigmas)
+            assert np.isfinite(c[placed]).all() and np.isnan(c[~placed]).all(), name
+            np.testing.assert_array_equal(c[:, 0, 1], c[:, 1, 0])
+            eig = np.linalg.eigvalsh(c[placed])
+            assert (eig[:, 0] > 0).all(), name
+            np.testing.assert_allclose(np.sqrt(eig[:, 1]), board.sigmas[placed], rtol=1e-9)
+
+
 @pytest.mark.parametrize("bad", ["Board", "", "global", "local "])
 def test_bad_refine_value_raises(bad):
     img = np.zeros((32, 32), np.uint8)

@@ -114,7 +114,9 @@ def test_detect_equals_cli(cli_bin, board_png, mode):
             assert cc.PATH_NAMES[b.paths[i]] == k["path"]
             if k["sigma"] is None:
                 assert np.isnan(b.sigmas[i])
+                assert np.isnan(b.covariances[i]).all()
             else:
                 assert b.sigmas[i] == k["sigma"]
+                np.testing.assert_array_equal(b.covariances[i], np.array(k["cov"]))
         if mode != "local":
             assert (b.paths == cc.PATH_BOARD).any(), "board mode by default, as the CLI"

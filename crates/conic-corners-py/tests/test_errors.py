@@ -140,7 +140,8 @@ def test_unknown_keyword_is_type_error():
 
 def test_object_points_bad_square_size():
     b = cc.Board(2, 2, np.zeros((4, 2)), np.zeros((4, 2), np.int32), np.zeros(4),
-                 np.zeros(4, np.uint8), np.zeros(4), np.zeros(4, np.uint8), np.full(4, np.nan))
+                 np.zeros(4, np.uint8), np.zeros(4), np.zeros(4, np.uint8), np.full(4, np.nan),
+                 np.full((4, 2, 2), np.nan))
     for s in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="square_size"):
             b.object_points(s)

@@ -184,10 +184,10 @@ pub struct FittedCorner {
     pub cov: [[f64; 2]; 2],
     /// `√` of the larger eigenvalue of `cov`: the standard deviation (px) in the worst direction.
     pub sigma: f64,
-    /// Where the row and column curves meet and the σ (px, worst direction) there, when that
-    /// was rejected for lying too far from the local answer ([`Fallback::TooFar`]): if the local
+    /// Where the row and column curves meet and the covariance (px²) there, when that was
+    /// rejected for lying too far from the local answer ([`Fallback::TooFar`]): if the local
     /// answer is itself doubtful (the refiner failed there), the junction is likelier here.
-    pub too_far: Option<([f64; 2], f64)>,
+    pub too_far: Option<([f64; 2], [[f64; 2]; 2])>,
 }
 
 /// Whether a fitted line runs along a row or a column of the board.
@@ -1686,7 +1686,7 @@ fn intersect_corner(
     }
     if dist(p, local) > params.max_shift {
         return FittedCorner {
-            too_far: Some((p, c.sigma)),
+            too_far: Some((p, c.cov)),
             ..fallback(Fallback::TooFar)
         };
     }
@@ -1764,6 +1764,7 @@ mod tests {
                 residual: None,
                 path: Path::Local,
                 sigma: None,
+                cov: None,
             })
             .collect();
         Board {
@@ -2123,6 +2124,7 @@ mod tests {
                     residual: None,
                     path: Path::Local,
                     sigma: None,
+                    cov: None,
                 })
                 .collect(),
         };

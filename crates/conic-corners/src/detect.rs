@@ -199,6 +199,12 @@ pub struct DetectedCorner {
     /// failed or the local refiner's
     /// curves did not meet.
     pub sigma: Option<f64>,
+    /// Covariance (px², image axes: `[[var x, cov xy], [cov xy, var y]]`) of the position, from
+    /// the same fits; `sigma` is the square root of its larger eigenvalue. Where one of the
+    /// corner's curves is short or extrapolated, the position is far surer across the other
+    /// curve than along it, which `sigma` alone cannot say: weigh a pose or calibration fit with
+    /// the inverse covariance. `None` when `sigma` is.
+    pub cov: Option<Cov>,
 }
 
 /// A board: its labelled corners, sorted by `(row, col)`.
@@ -347,6 +353,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         status: Status::Converged,
                         path: Path::Board,
                         sigma: Some(f.sigma),
+                        cov: Some(f.cov),
                         ..pixel
                     })
                 });
@@ -407,7 +414,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // polarities that a print's dot gain puts into every edge, and is off by about
                 // half of it: its σ says so before it is weighed against the other estimates.
                 if local.status == Status::Fallback {
-                    local.sigma = local.sigma.map(|s| s.hypot(half_offset));
+                    widen(&mut local, half_offset);
                 }
                 // A doubtful board-wide answer means short, extrapolated curves, where the
                 // local refiner's one-sided answer is no better; failing the gradient
@@ -427,7 +434,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // When nothing else places the corner, the curves' intersection beats the
                 // unrefined pixel position, if within the refiner's reach of it.
                 let curves = |c: DetectedCorner| match too_far {
-                    Some(([x, y], sigma))
+                    Some(([x, y], cov))
                         if c.status == Status::Failed
                             && (x - pixel.x).hypot(y - pixel.y) <= params.refine.max_shift =>
                     {
@@ -436,7 +443,8 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                             y,
                             status: Status::Fallback,
                             path: Path::Board,
-                            sigma: Some(sigma),
+                            sigma: Some(worst_sigma(cov)),
+                            cov: Some(cov),
                             ..c
                         }
                     }
@@ -493,7 +501,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // `one_sided_answers_are_weighed_with_their_polarity_offset`).
                 let offset = |mut c: DetectedCorner| {
                     if c.path == Path::Gradient {
-                        c.sigma = c.sigma.map(|s| s.hypot(half_offset));
+                        widen(&mut c, half_offset);
                     }
                     c
                 };
@@ -674,11 +682,17 @@ fn gradient_corner(
     params: &GradientParams,
 ) -> Option<DetectedCorner> {
     let g = refine_gradient(image, [c.x, c.y], params)?;
-    Some(fallback_at(c, g.point, g.sigma, Path::Gradient))
+    Some(fallback_at(c, g.point, g.sigma, g.cov, Path::Gradient))
 }
 
-/// `c` moved to `point` by the fallback refiner `path`, with its σ.
-fn fallback_at(c: DetectedCorner, point: [f64; 2], sigma: f64, path: Path) -> DetectedCorner {
+/// `c` moved to `point` by the fallback refiner `path`, with its σ and covariance.
+fn fallback_at(
+    c: DetectedCorner,
+    point: [f64; 2],
+    sigma: f64,
+    cov: Cov,
+    path: Path,
+) -> DetectedCorner {
     DetectedCorner {
         x: point[0],
         y: point[1],
@@ -686,7 +700,18 @@ fn fallback_at(c: DetectedCorner, point: [f64; 2], sigma: f64, path: Path) -> De
         residual: None,
         path,
         sigma: Some(sigma),
+        cov: Some(cov),
         ..c
+    }
+}
+
+/// `c`'s uncertainty widened by an independent error of `s` px in every direction (its
+/// covariance plus `s² I`, so σ becomes `√(σ² + s²)`).
+fn widen(c: &mut DetectedCorner, s: f64) {
+    c.sigma = c.sigma.map(|v| v.hypot(s));
+    if let Some(cov) = c.cov.as_mut() {
+        cov[0][0] += s * s;
+        cov[1][1] += s * s;
     }
 }
 
@@ -704,7 +729,7 @@ fn sigma_of(c: &DetectedCorner) -> f64 {
 }
 
 /// A 2×2 covariance (px², image axes).
-type Cov = [[f64; 2]; 2];
+pub type Cov = [[f64; 2]; 2];
 
 /// The board-wide answer `c` (covariance `cc`) combined with the junction model's answer `j`
 /// (covariance `cj`): two estimates of mostly independent data (the curves' samples along whole
@@ -724,13 +749,13 @@ fn fuse((c, cc): (DetectedCorner, Cov), (j, cj): (DetectedCorner, Cov)) -> Optio
     let (ic, ij) = (cc.try_inverse()?, cj.try_inverse()?);
     let p = (ic + ij).try_inverse()?;
     let x = p * (ic * pc + ij * pj);
+    let xy = 0.5 * (p[(0, 1)] + p[(1, 0)]);
+    let cov = [[p[(0, 0)], xy], [xy, p[(1, 1)]]];
     (x.iter().all(|v| v.is_finite())).then(|| DetectedCorner {
         x: x[0],
         y: x[1],
-        sigma: Some(worst_sigma([
-            [p[(0, 0)], p[(0, 1)]],
-            [p[(1, 0)], p[(1, 1)]],
-        ])),
+        sigma: Some(worst_sigma(cov)),
+        cov: Some(cov),
         ..c
     })
 }
@@ -792,7 +817,7 @@ fn junction_corner(
         &beyond,
         params,
     )?;
-    Some((fallback_at(c, j.point, j.sigma, Path::Junction), j.cov))
+    Some((fallback_at(c, j.point, j.sigma, j.cov, Path::Junction), j.cov))
 }
 
 /// Distance from `own` (label `(row, col)`) to its nearest labelled 8-neighbour on `board`
@@ -824,6 +849,7 @@ fn pixel_corner(c: &Corner, row: i32, col: i32) -> DetectedCorner {
         residual: None,
         path: Path::Local,
         sigma: None,
+        cov: None,
     }
 }
 
@@ -846,6 +872,7 @@ fn refine_corner(
         status: r.status,
         residual: r.residual,
         sigma: r.sigma,
+        cov: r.cov,
         ..pixel_corner(c, row, col)
     }
 }
@@ -866,6 +893,7 @@ mod tests {
             residual: None,
             path: Path::Board,
             sigma: Some(sigma),
+            cov: Some([[sigma * sigma, 0.0], [0.0, sigma * sigma]]),
         };
         // The board answer is sure of y (its row curve) and not of x (an extrapolated column
         // curve); the junction model the other way round.
@@ -907,6 +935,7 @@ mod tests {
             residual: None,
             path: Path::Local,
             sigma: None,
+            cov: None,
         };
         let mut board = Board {
             rows: 3,

@@ -95,6 +95,9 @@ pub struct GradientCorner {
     pub point: [f64; 2],
     /// Standard deviation (px) in the worst direction, from the sandwich covariance (module docs).
     pub sigma: f64,
+    /// The sandwich covariance of `point` (px², image axes); `sigma` is the square root of its
+    /// larger eigenvalue.
+    pub cov: [[f64; 2]; 2],
 }
 
 /// Refines the corner near `start` (image coordinates) by gradient orthogonality (see the module
@@ -132,8 +135,12 @@ pub fn refine_gradient(
     if centre != Some(c) {
         patch.load(image, c)?;
     }
-    let sigma = patch.sigma(q, params.window_sigma)?;
-    Some(GradientCorner { point: q, sigma })
+    let cov = patch.covariance(q, params.window_sigma)?;
+    Some(GradientCorner {
+        point: q,
+        sigma: worst_sigma(cov),
+        cov,
+    })
 }
 
 /// The smoothed gradients of a `(2r + 1)²` window around an integer centre.
@@ -276,8 +283,8 @@ impl Patch {
         Some([(ayy * bx - axy * by) / det, (axx * by - axy * bx) / det])
     }
 
-    /// The worst-direction standard deviation of the answer `q` (module docs).
-    fn sigma(&self, q: [f64; 2], window_sigma: f64) -> Option<f64> {
+    /// The sandwich covariance of the answer `q` (module docs).
+    fn covariance(&self, q: [f64; 2], window_sigma: f64) -> Option<[[f64; 2]; 2]> {
         let (mut a, mut b) = ([0.0f64; 3], [0.0f64; 3]);
         self.each(q, window_sigma, |p, g, w| {
             let r = g[0] * (q[0] - p[0]) + g[1] * (q[1] - p[1]);
@@ -293,8 +300,10 @@ impl Patch {
         Self::checked(a[0], a[1], a[2])?;
         let ai = Matrix2::new(a[0], a[1], a[1], a[2]).try_inverse()?;
         let c = ai * Matrix2::new(b[0], b[1], b[1], b[2]) * ai;
-        let sigma = worst_sigma([[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]]);
-        sigma.is_finite().then_some(sigma)
+        // Symmetric to the last bit: the product's two off-diagonal sums round differently.
+        let xy = 0.5 * (c[(0, 1)] + c[(1, 0)]);
+        let cov = [[c[(0, 0)], xy], [xy, c[(1, 1)]]];
+        cov.iter().flatten().all(|v| v.is_finite()).then_some(cov)
     }
 }
 

@@ -30,7 +30,7 @@ use crate::edge_sampling::{
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
     corner_covariance, fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
-    CurveFit, EdgeModel, Line, PositionStats, SAMPLE_BIAS_SIGMA_PX,
+    CurveFit, EdgeModel, Line, PositionStats, worst_sigma, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;
@@ -123,6 +123,9 @@ pub struct Refined {
     /// meet and straight lines stood in, of the two line fits with their RMS residual as a model
     /// error; `None` when failed.
     pub sigma: Option<f64>,
+    /// Covariance (px², image axes) of the position, from the same fits; `sigma` is the square
+    /// root of its larger eigenvalue. `None` when `sigma` is.
+    pub cov: Option<[[f64; 2]; 2]>,
     /// Edge samples used by the two curve fits.
     pub samples: usize,
 }
@@ -145,6 +148,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
         status: Status::Failed,
         residual: None,
         sigma: None,
+        cov: None,
         samples: 0,
     };
     if params.validate().is_err()
@@ -194,7 +198,8 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
             y: sol.point[1],
             status: sol.status,
             residual: Some(sol.residual),
-            sigma: sol.sigma,
+            sigma: sol.cov.map(worst_sigma),
+            cov: sol.cov,
             samples: sol.samples,
         },
         _ => failed,
@@ -373,9 +378,9 @@ struct Walks {
 
 struct Solution {
     point: [f64; 2],
-    /// Standard deviation (px, worst direction) of `point` from the two curve fits, when they
-    /// intersect.
-    sigma: Option<f64>,
+    /// Covariance (px²) of `point` from the two curve fits (or the lines that stand in for
+    /// them).
+    cov: Option<[[f64; 2]; 2]>,
     status: Status,
     residual: f64,
     samples: usize,
@@ -539,9 +544,9 @@ impl Walks {
             curves[e] = Some(fit.curve);
         }
         let (c0, c1) = (curves[0].as_ref()?, curves[1].as_ref()?);
-        let (point, sigma) = match nearest_intersection(c0, c1, near) {
+        let (point, cov) = match nearest_intersection(c0, c1, near) {
             Some(p) => {
-                let sigma = match &stats {
+                let cov = match &stats {
                     [Some(s0), Some(s1)] => corner_covariance(
                         c0,
                         s0.variance_at(p),
@@ -550,21 +555,21 @@ impl Walks {
                         p,
                         SAMPLE_BIAS_SIGMA_PX,
                     )
-                    .map(|c| c.sigma),
+                    .map(|c| c.cov),
                     _ => None,
                 };
-                (p, sigma)
+                (p, cov)
             }
             None => {
                 status = Status::Fallback;
                 let (l0, l1) = (lines[0]?, lines[1]?);
                 let p = intersect_lines(&l0, &l1)?;
-                (p, self.line_sigma([l0, l1], p))
+                (p, self.line_covariance([l0, l1], p))
             }
         };
         Some(Solution {
             point,
-            sigma,
+            cov,
             status,
             residual: (sq / 2.0).sqrt(),
             samples,
@@ -572,11 +577,11 @@ impl Walks {
         })
     }
 
-    /// σ (px, worst direction) of the intersection `p` of the straight lines that stand in where
-    /// the two curves did not meet, from each line's position variance along its edge's samples.
+    /// Covariance (px²) of the intersection `p` of the straight lines that stand in where the
+    /// two curves did not meet, from each line's position variance along its edge's samples.
     /// The lines miss the edges' bending, which the residuals show but their variance at `p`
     /// averages away: the larger of the two lines' RMS residuals enters as a systematic term.
-    fn line_sigma(&mut self, lines: [Line; 2], p: [f64; 2]) -> Option<f64> {
+    fn line_covariance(&mut self, lines: [Line; 2], p: [f64; 2]) -> Option<[[f64; 2]; 2]> {
         let mut spread = [(0.0, 0.0); 2];
         for (e, line) in lines.iter().enumerate() {
             self.points.clear();
@@ -604,7 +609,7 @@ impl Walks {
             p,
             SAMPLE_BIAS_SIGMA_PX.hypot(model),
         )
-        .map(|c| c.sigma)
+        .map(|c| c.cov)
     }
 }
 

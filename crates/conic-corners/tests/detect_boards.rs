@@ -1040,6 +1040,52 @@ fn every_corner_reports_its_uncertainty() {
     }
 }
 
+/// Every corner's covariance goes with its σ: symmetric, positive definite, its larger
+/// eigenvalue σ². Scenes that take every path: board answers, the junction model and the
+/// gradient estimate beside a bar and at silhouettes, one-sided and gradient answers widened by
+/// half the polarity offset under a dot gain of 0.3 mm. Boundary corners know one direction far better than the
+/// other, which σ alone (the worse one) hides.
+#[test]
+fn every_corner_s_covariance_goes_with_its_sigma() {
+    let scenes = [
+        (
+            scene(Surface::Cylinder { radius_mm: 60.0 }, 102, |t| {
+                t.occluders = vec![report_bar()]
+            }),
+            2,
+        ),
+        (scene(Surface::Flat, 103, |t| t.dot_gain_mm = 0.3), 3),
+    ];
+    let mut paths = Vec::new();
+    let mut elongated = 0;
+    for (s, noise_seed) in &scenes {
+        let det = detect(
+            &s.render(*noise_seed).expect("valid scene").image,
+            &DetectParams::default(),
+        );
+        for c in det.boards.iter().flat_map(|b| &b.corners) {
+            let (sigma, cov) = (c.sigma.expect("σ"), c.cov.expect("covariance"));
+            let (a, b, d) = (cov[0][0], cov[0][1], cov[1][1]);
+            assert_eq!(cov[0][1], cov[1][0], "{c:?}");
+            assert!(a > 0.0 && d > 0.0 && a * d - b * b > 0.0, "{c:?}");
+            let half = 0.5 * (a + d);
+            let spread = (0.25 * (a - d).powi(2) + b * b).sqrt();
+            let (large, small) = (half + spread, half - spread);
+            assert!(
+                (large.sqrt() - sigma).abs() <= 1e-9 * sigma,
+                "σ {sigma} against {}: {c:?}",
+                large.sqrt()
+            );
+            elongated += usize::from(large > 16.0 * small);
+            if !paths.contains(&c.path) {
+                paths.push(c.path);
+            }
+        }
+    }
+    assert!(paths.len() >= 3, "{paths:?}");
+    assert!(elongated > 0);
+}
+
 /// The robustness report's bar across the image: 40 px wide, gray 0.3.
 fn report_bar() -> Occluder {
     Occluder {

@@ -28,8 +28,9 @@
 //!   image coordinates x right, y down, the centre of the top-left pixel at `(0, 0)`, curvature in
 //!   px⁻¹ as [`BoardCorner::curvature`];
 //! - `ours.jsonl`, one line per view and method (`conic-corners-local`, `conic-corners-board`):
-//!   `{"image", "method", "ms", "corners": [[x, y, sigma | null]]}` with the corners of every board
-//!   found (sigma: [`conic_corners::detect::DetectedCorner::sigma`]).
+//!   `{"image", "method", "ms", "corners": [[x, y, sigma, cov_xx, cov_xy, cov_yy]]}` with the
+//!   corners of every board found (sigma and the covariance, px²:
+//!   [`conic_corners::detect::DetectedCorner::sigma`] and `cov`; `null` where there is none).
 //!
 //! `bench/board_peers.py` adds the peers, `bench/board_report.py` the tables;
 //! `bench/board_accuracy.sh` runs all three.
@@ -402,7 +403,10 @@ fn detect_view(path: &Path, rel: &str) -> Result<Vec<Value>, String> {
             .boards
             .iter()
             .flat_map(|b| &b.corners)
-            .map(|c| json!([c.x, c.y, c.sigma]))
+            .map(|c| {
+                let [[xx, xy], [_, yy]] = c.cov.map_or([[None; 2]; 2], |m| m.map(|r| r.map(Some)));
+                json!([c.x, c.y, c.sigma, xx, xy, yy])
+            })
             .collect();
         out.push(json!({ "image": rel, "method": name, "ms": ms, "corners": corners }));
     }

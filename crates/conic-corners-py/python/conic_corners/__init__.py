@@ -95,6 +95,11 @@ class Board:
         sigmas: N ``float64`` standard deviations (px) of the position in its worst direction,
             propagated from the residuals of the fits that placed it (board-wide or local curves,
             or the gradient estimate, whose sigma is conservative); NaN where refinement failed.
+        covariances: N×2×2 ``float64`` covariances (px², ``[[xx, xy], [xy, yy]]``) of the
+            positions, from the same fits: ``sigmas`` is the square root of each one's larger
+            eigenvalue. A corner whose row curve is sure and whose column curve is extrapolated
+            is known far better across the row than along it; weigh a pose or calibration fit
+            with the inverse covariances to use that. NaN where refinement failed.
 
     A board may have holes (occluded corners), so ``len(board)`` can be less than ``rows * cols``.
     """
@@ -108,6 +113,7 @@ class Board:
     residuals: np.ndarray
     paths: np.ndarray
     sigmas: np.ndarray
+    covariances: np.ndarray
 
     def __len__(self) -> int:
         return int(self.points.shape[0])

@@ -46,6 +46,8 @@ class Board:
     """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT, PATH_JUNCTION)."""
     sigmas: npt.NDArray[np.float64]
     """N standard deviations (px, worst direction) of the positions, NaN where refinement failed."""
+    covariances: npt.NDArray[np.float64]
+    """N×2×2 covariances (px²) of the positions, NaN where refinement failed."""
     def __init__(
         self,
         rows: int,
@@ -57,6 +59,7 @@ class Board:
         residuals: npt.NDArray[np.float64],
         paths: npt.NDArray[np.uint8],
         sigmas: npt.NDArray[np.float64],
+        covariances: npt.NDArray[np.float64],
     ) -> None: ...
     def __len__(self) -> int: ...
     @property
