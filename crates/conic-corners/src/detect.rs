@@ -357,18 +357,17 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         ..pixel
                     })
                 });
-                let board_cov = fitted.as_ref().map(|f| f[k].cov);
                 if let Some(c) = board.filter(|c| c.sigma.is_some_and(|s| s <= sigma_limit)) {
-                    return match (junction.as_ref(), board_cov) {
-                        (Some(j), Some(cov))
+                    return match junction.as_ref() {
+                        Some(j)
                             if c.sigma
                                 .is_some_and(|s| s > params.junction_gate * typical_sigma) =>
                         {
                             match junction_corner(image, &corners, b, i, c, j, false) {
                                 // Where they disagree, the one that claims the smaller σ.
-                                Some(jc) => fuse((c, cov), jc).unwrap_or_else(|| {
-                                    if sigma_of(&jc.0) < sigma_of(&c) {
-                                        jc.0
+                                Some(jc) => fuse(c, jc).unwrap_or_else(|| {
+                                    if sigma_of(&jc) < sigma_of(&c) {
+                                        jc
                                     } else {
                                         c
                                     }
@@ -453,11 +452,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // The junction model where the walks failed or saw one side only; a one-sided
                 // local answer with no board answer stays if it claims the smaller σ.
                 if let Some(j) = junction.as_ref().filter(|_| weak) {
-                    if let Some((jc, jcov)) = junction_corner(image, &corners, b, i, pixel, j, true)
-                    {
+                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
                         // A board answer (doubtful, but often sure of one direction: the curve
                         // that is not extrapolated) that agrees is combined with it.
-                        if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {
+                        if let Some(f) = board.and_then(|bc| fuse(bc, jc)) {
                             return f;
                         }
                         let one_sided = last.status == Status::Fallback && board.is_none();
@@ -481,9 +479,8 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 };
                 let doubtful = !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
                 if let Some(j) = junction.as_ref().filter(|_| doubtful) {
-                    if let Some((jc, jcov)) = junction_corner(image, &corners, b, i, pixel, j, true)
-                    {
-                        if let Some(f) = board.zip(board_cov).and_then(|bc| fuse(bc, (jc, jcov))) {
+                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
+                        if let Some(f) = board.and_then(|bc| fuse(bc, jc)) {
                             return f;
                         }
                         if sigma_of(&jc) < sigma_of(&last) {
@@ -682,24 +679,18 @@ fn gradient_corner(
     params: &GradientParams,
 ) -> Option<DetectedCorner> {
     let g = refine_gradient(image, [c.x, c.y], params)?;
-    Some(fallback_at(c, g.point, g.sigma, g.cov, Path::Gradient))
+    Some(fallback_at(c, g.point, g.cov, Path::Gradient))
 }
 
-/// `c` moved to `point` by the fallback refiner `path`, with its σ and covariance.
-fn fallback_at(
-    c: DetectedCorner,
-    point: [f64; 2],
-    sigma: f64,
-    cov: Cov,
-    path: Path,
-) -> DetectedCorner {
+/// `c` moved to `point` by the fallback refiner `path`, with its covariance (and σ from it).
+fn fallback_at(c: DetectedCorner, point: [f64; 2], cov: Cov, path: Path) -> DetectedCorner {
     DetectedCorner {
         x: point[0],
         y: point[1],
         status: Status::Fallback,
         residual: None,
         path,
-        sigma: Some(sigma),
+        sigma: Some(worst_sigma(cov)),
         cov: Some(cov),
         ..c
     }
@@ -731,15 +722,15 @@ fn sigma_of(c: &DetectedCorner) -> f64 {
 /// A 2×2 covariance (px², image axes).
 pub type Cov = [[f64; 2]; 2];
 
-/// The board-wide answer `c` (covariance `cc`) combined with the junction model's answer `j`
-/// (covariance `cj`): two estimates of mostly independent data (the curves' samples along whole
+/// The board-wide answer `c` combined with the junction model's answer `j`, by their
+/// covariances: two estimates of mostly independent data (the curves' samples along whole
 /// grid lines, the pixels within a few pixels of the junction), weighted by their inverse
 /// covariances, so that each contributes along the direction it knows best. `None` if they
 /// disagree: the Mahalanobis distance of their difference above the 99 % point of χ²₂, or a
-/// covariance that cannot be inverted.
-fn fuse((c, cc): (DetectedCorner, Cov), (j, cj): (DetectedCorner, Cov)) -> Option<DetectedCorner> {
+/// covariance that cannot be inverted or is missing.
+fn fuse(c: DetectedCorner, j: DetectedCorner) -> Option<DetectedCorner> {
     let m = |a: Cov| Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1]);
-    let (cc, cj) = (m(cc), m(cj));
+    let (cc, cj) = (m(c.cov?), m(j.cov?));
     let (pc, pj) = (Vector2::new(c.x, c.y), Vector2::new(j.x, j.y));
     let d = pc - pj;
     let q = d.dot(&((cc + cj).try_inverse()? * d));
@@ -777,7 +768,7 @@ fn junction_corner(
     c: DetectedCorner,
     params: &JunctionParams,
     slivers: bool,
-) -> Option<(DetectedCorner, Cov)> {
+) -> Option<DetectedCorner> {
     let at = |dr: i32, dc: i32| {
         let k = board
             .labels
@@ -817,7 +808,7 @@ fn junction_corner(
         &beyond,
         params,
     )?;
-    Some((fallback_at(c, j.point, j.sigma, j.cov, Path::Junction), j.cov))
+    Some(fallback_at(c, j.point, j.cov, Path::Junction))
 }
 
 /// Distance from `own` (label `(row, col)`) to its nearest labelled 8-neighbour on `board`
@@ -883,7 +874,7 @@ mod tests {
 
     #[test]
     fn fusion_takes_each_direction_from_the_estimate_that_knows_it() {
-        let at = |x: f64, y: f64, sigma: f64| DetectedCorner {
+        let at = |x: f64, y: f64, cov: Cov| DetectedCorner {
             x,
             y,
             row: 0,
@@ -892,13 +883,13 @@ mod tests {
             status: Status::Converged,
             residual: None,
             path: Path::Board,
-            sigma: Some(sigma),
-            cov: Some([[sigma * sigma, 0.0], [0.0, sigma * sigma]]),
+            sigma: Some(worst_sigma(cov)),
+            cov: Some(cov),
         };
         // The board answer is sure of y (its row curve) and not of x (an extrapolated column
         // curve); the junction model the other way round.
-        let board = (at(10.3, 20.0, 0.3), [[0.09, 0.0], [0.0, 1e-4]]);
-        let junction = (at(10.0, 20.02, 0.1), [[1e-4, 0.0], [0.0, 0.01]]);
+        let board = at(10.3, 20.0, [[0.09, 0.0], [0.0, 1e-4]]);
+        let junction = at(10.0, 20.02, [[1e-4, 0.0], [0.0, 0.01]]);
         let f = fuse(board, junction).unwrap();
         assert!(
             (f.x - 10.0).abs() < 1e-3 && (f.y - 20.0).abs() < 3e-4,
@@ -909,18 +900,20 @@ mod tests {
         assert!(f.sigma.unwrap() < 0.011, "{f:?}");
         // Correlated covariances: the same answer whichever is first.
         let (a, b) = (
-            (at(5.0, 5.0, 0.1), [[0.01, 0.004], [0.004, 0.005]]),
-            (at(5.05, 4.98, 0.1), [[0.003, -0.001], [-0.001, 0.008]]),
+            at(5.0, 5.0, [[0.01, 0.004], [0.004, 0.005]]),
+            at(5.05, 4.98, [[0.003, -0.001], [-0.001, 0.008]]),
         );
         let (ab, ba) = (fuse(a, b).unwrap(), fuse(b, a).unwrap());
         assert!((ab.x - ba.x).abs() < 1e-12 && (ab.y - ba.y).abs() < 1e-12);
         // Disagreeing: 1 px apart where both claim 0.1 px. Singular: refused.
         assert!(fuse(
-            (at(0.0, 0.0, 0.1), [[0.01, 0.0], [0.0, 0.01]]),
-            (at(1.0, 0.0, 0.1), [[0.01, 0.0], [0.0, 0.01]])
+            at(0.0, 0.0, [[0.01, 0.0], [0.0, 0.01]]),
+            at(1.0, 0.0, [[0.01, 0.0], [0.0, 0.01]])
         )
         .is_none());
-        assert!(fuse((at(10.0, 20.02, 0.1), [[0.0, 0.0], [0.0, 0.01]]), junction).is_none());
+        assert!(fuse(at(10.0, 20.02, [[0.0, 0.0], [0.0, 0.01]]), junction).is_none());
+        // Without a covariance: refused.
+        assert!(fuse(DetectedCorner { cov: None, ..board }, junction).is_none());
     }
 
     #[test]
