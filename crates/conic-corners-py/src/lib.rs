@@ -333,9 +333,10 @@ fn detect<'py>(
 
 /// Refines approximate corners (see `conic_corners.refine` for the documented API).
 ///
-/// `points` is an N×2 or N×1×2 float32/float64 array; returns `(refined, status, residuals)`:
-/// `refined` has the shape and dtype of `points`, `status` is N uint8 (0 failed, 1 fallback,
-/// 2 converged), `residuals` N float64 (NaN where failed).
+/// `points` is an N×2 or N×1×2 float32/float64 array; returns `(refined, status, residuals,
+/// covariances)`: `refined` has the shape and dtype of `points`, `status` is N uint8 (0 failed,
+/// 1 fallback, 2 converged), `residuals` N float64 and `covariances` N×2×2 float64 (px², NaN
+/// where failed).
 #[pyfunction]
 #[pyo3(signature = (image, points, *, reach=None, stride=None, blur=None, bgr=false))]
 #[allow(clippy::type_complexity)]
@@ -347,7 +348,12 @@ fn refine<'py>(
     stride: Option<i64>,
     blur: Option<f64>,
     bgr: bool,
-) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+) -> PyResult<(
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+)> {
     let params = refine_params(RefineParams::default(), reach, stride, blur)?;
     let arr = points.cast::<PyUntypedArray>().map_err(|_| {
         PyTypeError::new_err(format!(
@@ -394,6 +400,14 @@ fn refine<'py>(
         .iter()
         .map(|r| r.residual.unwrap_or(f64::NAN))
         .collect();
+    let mut covariances = Array3::<f64>::from_elem((refined.len(), 2, 2), f64::NAN);
+    for (i, cov) in refined.iter().enumerate() {
+        for (r, row) in cov.cov.iter().flatten().enumerate() {
+            for (k, v) in row.iter().enumerate() {
+                covariances[[i, r, k]] = *v;
+            }
+        }
+    }
     let out = if is_f32 {
         let v: Vec<f32> = flat.iter().map(|&x| x as f32).collect();
         v.into_pyarray(py).reshape(shape.as_slice())?.into_any()
@@ -404,6 +418,7 @@ fn refine<'py>(
         out,
         status.into_pyarray(py).into_any(),
         residuals.into_pyarray(py).into_any(),
+        covariances.into_pyarray(py).into_any(),
     ))
 }
 

@@ -72,10 +72,24 @@ def starts_for(b):
 def test_refine_equals_cli(cli_bin, board_png, tmp_path, extra):
     path, gray, b = board_png
     starts = starts_for(b)
-    p, s, r = cc.refine(gray, starts, return_residuals=True, **extra)
+    p, s, r, cov = cc.refine(gray, starts, return_residuals=True, return_covariances=True,
+                             **extra)
     flags = [x for k, v in extra.items() for x in (f"--{k}", str(v))]
-    assert_same_as_cli(p, s, r, cli_refine(cli_bin, path, starts, tmp_path, flags))
+    cli = cli_refine(cli_bin, path, starts, tmp_path, flags)
+    assert_same_as_cli(p, s, r, cli)
     assert (s[:-2] == cc.CONVERGED).all()
+    # The covariances are the CLI's, NaN where refinement failed; the larger eigenvalue is σ².
+    assert cov.shape == (len(starts), 2, 2)
+    for c, k in zip(cov, cli):
+        if k["cov"] is None:
+            assert np.isnan(c).all() and k["sigma"] is None
+        else:
+            np.testing.assert_array_equal(c, np.array(k["cov"]))
+            assert np.sqrt(np.linalg.eigvalsh(c)[1]) == pytest.approx(k["sigma"], rel=1e-9)
+    assert np.isnan(cov[-1]).all()
+    # Asked for alone, the covariances come third.
+    p2, s2, cov2 = cc.refine(gray, starts, return_covariances=True, **extra)
+    np.testing.assert_array_equal(cov2, cov)
 
 
 def test_refine_colour_equals_cli(cli_bin, colour_png, board_png, tmp_path):

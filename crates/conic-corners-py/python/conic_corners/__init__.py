@@ -211,6 +211,7 @@ def refine(
     blur: Optional[float] = None,
     bgr: bool = False,
     return_residuals: bool = False,
+    return_covariances: bool = False,
 ):
     """Refines approximate corner positions (up to ~2 px off) to subpixel accuracy.
 
@@ -226,17 +227,21 @@ def refine(
         blur: Gaussian blur σ (px) of the image if known, 0..=20; estimated when ``None``.
         bgr: colour images are in OpenCV's B, G, R order.
         return_residuals: also return the N ``float64`` RMS fit residuals (px, NaN where failed).
+        return_covariances: also return the N×2×2 ``float64`` covariances (px²,
+            ``[[xx, xy], [xy, yy]]``) of the refined positions, propagated from the fits (the
+            square root of the larger eigenvalue is the CLI's ``sigma``); NaN where failed.
 
     Returns:
-        ``(refined, status)`` (or ``(refined, status, residuals)``): ``status`` is an N ``uint8``
-        array of codes: 0 :data:`FAILED` (the start position is returned: not at a corner,
-        outside the image, …), 1 :data:`FALLBACK`, 2 :data:`CONVERGED`.
+        ``(refined, status)``, followed by ``residuals`` and then ``covariances`` when asked
+        for: ``status`` is an N ``uint8`` array of codes: 0 :data:`FAILED` (the start position
+        is returned: not at a corner, outside the image, …), 1 :data:`FALLBACK`, 2
+        :data:`CONVERGED`.
 
     Raises:
         TypeError: unsupported dtype (image, or points not float32/float64).
         ValueError: bad shape, empty image or points, NaN/inf points, parameter out of range.
     """
-    refined, status, residuals = _native.refine(
+    refined, status, residuals, covariances = _native.refine(
         _as_array(image),
         _as_array(points),
         reach=reach,
@@ -244,9 +249,12 @@ def refine(
         blur=blur,
         bgr=bgr,
     )
+    out = (refined, status)
     if return_residuals:
-        return refined, status, residuals
-    return refined, status
+        out += (residuals,)
+    if return_covariances:
+        out += (covariances,)
+    return out
 
 
 def _as_array(a) -> np.ndarray:

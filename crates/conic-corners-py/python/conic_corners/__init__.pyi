@@ -95,6 +95,7 @@ def refine(
     blur: Optional[float] = None,
     bgr: bool = False,
     return_residuals: Literal[False] = False,
+    return_covariances: Literal[False] = False,
 ) -> Tuple[npt.NDArray[np.floating], npt.NDArray[np.uint8]]:
     """Refines N×2 / N×1×2 float32/float64 points; returns (points like the input, status)."""
 @overload
@@ -107,5 +108,34 @@ def refine(
     blur: Optional[float] = None,
     bgr: bool = False,
     return_residuals: Literal[True],
+    return_covariances: Literal[False] = False,
 ) -> Tuple[npt.NDArray[np.floating], npt.NDArray[np.uint8], npt.NDArray[np.float64]]:
     """Refines points; returns (points like the input, status, residuals)."""
+@overload
+def refine(
+    image: npt.ArrayLike,
+    points: npt.NDArray[np.floating],
+    *,
+    reach: Optional[float] = None,
+    stride: Optional[int] = None,
+    blur: Optional[float] = None,
+    bgr: bool = False,
+    return_residuals: Literal[False] = False,
+    return_covariances: Literal[True],
+) -> Tuple[npt.NDArray[np.floating], npt.NDArray[np.uint8], npt.NDArray[np.float64]]:
+    """Refines points; returns (points like the input, status, N×2×2 covariances in px²)."""
+@overload
+def refine(
+    image: npt.ArrayLike,
+    points: npt.NDArray[np.floating],
+    *,
+    reach: Optional[float] = None,
+    stride: Optional[int] = None,
+    blur: Optional[float] = None,
+    bgr: bool = False,
+    return_residuals: Literal[True],
+    return_covariances: Literal[True],
+) -> Tuple[
+    npt.NDArray[np.floating], npt.NDArray[np.uint8], npt.NDArray[np.float64], npt.NDArray[np.float64]
+]:
+    """Refines points; returns (points like the input, status, residuals, covariances)."""
