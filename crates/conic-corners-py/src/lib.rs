@@ -232,6 +232,21 @@ fn refine_params(
     Ok(params)
 }
 
+/// N×2×2 array of the covariances (px²), NaN where a corner has none.
+fn covariance_array(covs: impl ExactSizeIterator<Item = Option<[[f64; 2]; 2]>>) -> Array3<f64> {
+    let mut out = Array3::<f64>::from_elem((covs.len(), 2, 2), f64::NAN);
+    for (i, cov) in covs.enumerate() {
+        if let Some(cov) = cov {
+            for (r, row) in cov.iter().enumerate() {
+                for (k, v) in row.iter().enumerate() {
+                    out[[i, r, k]] = *v;
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Runs the whole detection pipeline (see `conic_corners.detect` for the documented API).
 ///
 /// Returns one dict per board, largest first, with keys `rows`, `cols`, `points` (N×2 float64,
@@ -296,7 +311,6 @@ fn detect<'py>(
             let mut residuals = Array1::<f64>::zeros(n);
             let mut paths = Array1::<u8>::zeros(n);
             let mut sigmas = Array1::<f64>::zeros(n);
-            let mut covariances = Array3::<f64>::from_elem((n, 2, 2), f64::NAN);
             for (i, c) in board.corners.iter().enumerate() {
                 points[[i, 0]] = c.x;
                 points[[i, 1]] = c.y;
@@ -307,14 +321,8 @@ fn detect<'py>(
                 residuals[i] = c.residual.unwrap_or(f64::NAN);
                 paths[i] = path_code(c.path);
                 sigmas[i] = c.sigma.unwrap_or(f64::NAN);
-                if let Some(cov) = c.cov {
-                    for (r, row) in cov.iter().enumerate() {
-                        for (k, v) in row.iter().enumerate() {
-                            covariances[[i, r, k]] = *v;
-                        }
-                    }
-                }
             }
+            let covariances = covariance_array(board.corners.iter().map(|c| c.cov));
             let d = PyDict::new(py);
             d.set_item("rows", board.rows)?;
             d.set_item("cols", board.cols)?;
@@ -400,14 +408,7 @@ fn refine<'py>(
         .iter()
         .map(|r| r.residual.unwrap_or(f64::NAN))
         .collect();
-    let mut covariances = Array3::<f64>::from_elem((refined.len(), 2, 2), f64::NAN);
-    for (i, cov) in refined.iter().enumerate() {
-        for (r, row) in cov.cov.iter().flatten().enumerate() {
-            for (k, v) in row.iter().enumerate() {
-                covariances[[i, r, k]] = *v;
-            }
-        }
-    }
+    let covariances = covariance_array(refined.iter().map(|r| r.cov));
     let out = if is_f32 {
         let v: Vec<f32> = flat.iter().map(|&x| x as f32).collect();
         v.into_pyarray(py).reshape(shape.as_slice())?.into_any()
