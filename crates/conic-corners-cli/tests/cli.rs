@@ -243,7 +243,10 @@ fn colour_and_sixteen_bit_images_are_read_as_grey() {
             .expect("a converged corner has a sigma");
         assert!(sigma > 0.0 && sigma < 0.1, "{sigma}");
         let var_x = v["corners"][0]["cov"][0][0].as_f64().expect("a covariance");
-        assert!(var_x > 0.0 && var_x <= sigma * sigma * (1.0 + 1e-9), "{var_x}");
+        assert!(
+            var_x > 0.0 && var_x <= sigma * sigma * (1.0 + 1e-9),
+            "{var_x}"
+        );
         assert!((v["corners"][0]["x"].as_f64().unwrap() - 100.3).abs() < 0.05);
     }
 }
@@ -320,9 +323,9 @@ fn detect_finds_and_labels_a_rendered_board() {
         .unwrap();
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
-    assert!(text.starts_with(
-        "image,board,row,col,x,y,score,status,path,sigma,cov_xx,cov_xy,cov_yy\n"
-    ));
+    assert!(
+        text.starts_with("image,board,row,col,x,y,score,status,path,sigma,cov_xx,cov_xy,cov_yy\n")
+    );
     assert_eq!(text.lines().count(), 1 + truth.len());
     for row in text.lines().skip(1) {
         let f: Vec<&str> = row.split(',').collect();
@@ -334,7 +337,10 @@ fn detect_finds_and_labels_a_rendered_board() {
         let sigma: f64 = f[9].parse().expect("a placed corner has a sigma");
         assert!(sigma > 0.0 && sigma < 1.0, "{row}");
         // σ is the worst direction's: no variance along an axis exceeds σ² (σ printed to 1e-6).
-        let cov: Vec<f64> = f[10..].iter().map(|v| v.parse().expect("covariance")).collect();
+        let cov: Vec<f64> = f[10..]
+            .iter()
+            .map(|v| v.parse().expect("covariance"))
+            .collect();
         assert!(cov[0] > 0.0 && cov[2] > 0.0, "{row}");
         assert!(cov[0].max(cov[2]) <= (sigma + 5e-7).powi(2), "{row}");
     }

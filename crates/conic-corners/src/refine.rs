@@ -29,8 +29,8 @@ use crate::edge_sampling::{
 };
 use crate::election::edge_orientations;
 use crate::quadratic_form::{
-    corner_covariance, fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection, Curve,
-    CurveFit, EdgeModel, Line, PositionStats, worst_sigma, SAMPLE_BIAS_SIGMA_PX,
+    corner_covariance, fit_edge_curve, fit_line_tls, intersect_lines, nearest_intersection,
+    worst_sigma, Curve, CurveFit, EdgeModel, Line, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;

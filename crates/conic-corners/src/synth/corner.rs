@@ -633,8 +633,7 @@ mod tests {
         let integral = |a: f64, b: f64, s: f64| {
             let prim = |u: f64| {
                 let z = u / s;
-                s * (z * 0.5 * (1.0 + erf(z / SQRT_2))
-                    + (-0.5 * z * z).exp() / (2.0 * PI).sqrt())
+                s * (z * 0.5 * (1.0 + erf(z / SQRT_2)) + (-0.5 * z * z).exp() / (2.0 * PI).sqrt())
             };
             prim(b) - prim(a)
         };
