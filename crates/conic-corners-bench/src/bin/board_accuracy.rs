@@ -67,6 +67,22 @@ struct Args {
     /// noise-free views, which separates a method's bias from its noise.
     #[arg(long, default_value_t = 1.0)]
     noise_scale: f64,
+    /// Compress every view as a JPEG of this quality (1–100) and save the decoded pixels (as
+    /// PNG, so that every method reads the same pixels whatever its JPEG decoder): a camera's
+    /// or a phone's compression, which moves edges block by block.
+    #[arg(long)]
+    jpeg_quality: Option<u8>,
+}
+
+/// `image` compressed as a JPEG of `quality` and decoded again.
+fn through_jpeg(image: image::GrayImage, quality: u8) -> Result<image::GrayImage, String> {
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality)
+        .encode_image(&image)
+        .map_err(|e| e.to_string())?;
+    Ok(image::load_from_memory(&bytes)
+        .map_err(|e| e.to_string())?
+        .to_luma8())
 }
 
 /// Inner corners per column and per row of every board.
@@ -327,9 +343,11 @@ fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
         let rendered = scene.render(noise_seed).map_err(|e| e.to_string())?;
         let rel = format!("images/{i:04}_{side}.png");
         let path = args.out.join(&rel);
-        rendered
-            .image
-            .to_luma8(0.0, 1.0)
+        let mut pixels = rendered.image.to_luma8(0.0, 1.0);
+        if let Some(q) = args.jpeg_quality {
+            pixels = through_jpeg(pixels, q)?;
+        }
+        pixels
             .save(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?;
         ours.extend(detect_view(&path, &rel)?);
@@ -421,6 +439,9 @@ fn validate(args: &Args) -> Result<(), String> {
     if !(args.noise_scale.is_finite() && args.noise_scale >= 0.0) {
         return Err("--noise-scale must be finite and at least 0".into());
     }
+    if args.jpeg_quality.is_some_and(|q| !(1..=100).contains(&q)) {
+        return Err("--jpeg-quality must be in 1..=100".into());
+    }
     Ok(())
 }
 
@@ -465,6 +486,22 @@ mod tests {
     }
 
     #[test]
+    fn jpeg_compression_moves_pixels_near_edges_only_a_little() {
+        let step = image::GrayImage::from_fn(64, 48, |x, y| {
+            image::Luma([if 3 * x + y < 100 { 30 } else { 220 }])
+        });
+        let out = through_jpeg(step.clone(), 75).unwrap();
+        assert_eq!(out.dimensions(), step.dimensions());
+        let diff: Vec<i32> = step
+            .pixels()
+            .zip(out.pixels())
+            .map(|(a, b)| (a[0] as i32 - b[0] as i32).abs())
+            .collect();
+        let mean = diff.iter().sum::<i32>() as f64 / diff.len() as f64;
+        assert!(diff.iter().any(|&d| d > 0) && mean < 5.0, "{mean}");
+    }
+
+    #[test]
     fn bad_options_are_refused_by_name() {
         let args = |extra: &[&str]| {
             Args::try_parse_from(["board-accuracy", "--out", "x"].iter().chain(extra)).unwrap()
@@ -477,6 +514,8 @@ mod tests {
             ("--noise-scale", "-1"),
             ("--noise-scale", "inf"),
             ("--noise-scale", "NaN"),
+            ("--jpeg-quality", "0"),
+            ("--jpeg-quality", "101"),
         ] {
             let err = validate(&args(&[&format!("{flag}={value}")])).unwrap_err();
             assert!(err.starts_with(flag), "{flag} {value}: {err}");
