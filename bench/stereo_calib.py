@@ -21,6 +21,14 @@ same corners for all) and then on each method's own:
                 view's pose solved with it (solvePnP, iterative) and its corners reprojected; RMS
                 (px) over all left-out corners. A corner's own error cannot be fitted away here.
   stereo RMS    cv2.stereoCalibrate with each method's intrinsics fixed (px), over the pairs.
+  noise         the held-out residuals' differences between grid neighbours (along rows and
+                columns), RMS per axis over sqrt(2): what the model leaves out is smooth over the
+                board and mostly cancels, a corner's own error does not (px; a truth-free estimate
+                of each corner's error per axis).
+  cov scale     for a method that reports covariances: the neighbours' residual differences d
+                against their summed covariances, sqrt(median(d' (C_i + C_j)^-1 d) / 1.386) (the
+                median of a chi-square with 2 degrees of freedom): 1 where the covariances are
+                honest, above 1 where they are too small.
 Coordinates: x right, y down, the centre of the top-left pixel at (0, 0) (bench/peers.py checks
 each peer's convention).
 """
@@ -64,7 +72,8 @@ def canonical(corners, shape):
 
 
 def ours(cli, images, mode):
-    """{image: (labelled board {(r, c): (x, y)} or None, ms)} from `conic-corners detect`."""
+    """{image: (labelled board {(r, c): (x, y)} or None, {(x, y): covariance}, ms)} from
+    `conic-corners detect`."""
     out = subprocess.run([cli, "detect", "--refine", mode, *images], capture_output=True,
                          text=True, check=True).stdout
     res = {}
@@ -73,7 +82,9 @@ def ours(cli, images, mode):
         boards = [b for b in r["boards"] if len(b["corners"]) >= 4]
         board = canonical(boards[0]["corners"], (boards[0]["rows"], boards[0]["cols"])) \
             if boards else None
-        res[r["image"]["path"]] = (board, r["timing_ms"]["total"])
+        cov = {(c["x"], c["y"]): np.array(c["cov"]) for b in boards for c in b["corners"]
+               if c.get("cov") is not None}
+        res[r["image"]["path"]] = (board, cov, r["timing_ms"]["total"])
     return res
 
 
@@ -110,18 +121,30 @@ def calibrate(views, size):
 
 
 def held_out(views, size):
-    """RMS (px) over the corners of each view, reprojected with the camera of the others."""
-    sq, n = 0.0, 0
+    """RMS (px) over the corners of each view, reprojected with the camera of the others, and
+    each view's residuals (image minus model) by board point."""
+    sq, n, residuals = 0.0, 0, []
     for i, (obj, img) in enumerate(views):
         _, k, dist = calibrate(views[:i] + views[i + 1:], size)
         ok, rvec, tvec = cv2.solvePnP(obj, img, k, dist, flags=cv2.SOLVEPNP_ITERATIVE)
         if not ok:
+            residuals.append({})
             continue
         proj, _ = cv2.projectPoints(obj, rvec, tvec, k, dist)
-        e = (proj - img).reshape(-1, 2)
+        e = (img - proj).reshape(-1, 2).astype(np.float64)
         sq += float(np.sum(e * e))
         n += len(e)
-    return np.sqrt(sq / n) if n else float("nan")
+        residuals.append({(int(o[1]), int(o[0])): d for o, d in zip(obj, e)})
+    return (np.sqrt(sq / n) if n else float("nan")), residuals
+
+
+def neighbour_pairs(residuals):
+    """(label, label) of grid neighbours (along rows and columns) with residuals in one view."""
+    for res in residuals:
+        for (r, c) in res:
+            for q in ((r, c + 1), (r + 1, c)):
+                if q in res:
+                    yield res, (r, c), q
 
 
 def main():
@@ -143,7 +166,10 @@ def main():
     found = {m: ours(a.cli, images, m.rsplit("-", 1)[1]) for m in OURS}
     reference = {im: found["conic-corners-board"][im][0] for im in images}
     labelled = {m: {im: found[m][im][0] or {} for im in images} for m in OURS}
-    ms = {m: [found[m][im][1] for im in images] for m in OURS}
+    # Covariance by label, for the methods that report one.
+    covs = {m: {im: {k: found[m][im][1].get(p) for k, p in labelled[m][im].items()}
+                for im in images} for m in OURS}
+    ms = {m: [found[m][im][2] for im in images] for m in OURS}
     for m in peers:
         labelled[m], ms[m] = {}, []
     for im in images:
@@ -164,18 +190,29 @@ def main():
         row = {"method": m, "corners": sum(len(v) for v in labelled[m].values()),
                "views": sum(len(v) >= 20 for v in labelled[m].values())}
         for scope in ("common", "own"):
-            cams = {}
+            cams, diffs, d2 = {}, [], []
             for side in ("left", "right"):
-                views = []
+                views, view_covs = [], []
                 for p in pairs:
                     im = os.path.join(a.images, side + p)
                     keys = sorted(common[im] if scope == "common" else labelled[m][im])
                     if len(keys) >= 20:
                         views.append((board_points(keys), image_points(labelled[m][im], keys)))
+                        view_covs.append(covs.get(m, {}).get(im, {}))
                 fit, k, dist = calibrate(views, size)
                 cams[side] = (k, dist)
                 row[f"{scope} {side} fit"] = fit
-                row[f"{scope} {side} held-out"] = held_out(views, size)
+                row[f"{scope} {side} held-out"], residuals = held_out(views, size)
+                for (res, i, j), cov in zip(neighbour_pairs(residuals), (
+                        cv for res, cv in zip(residuals, view_covs)
+                        for _ in neighbour_pairs([res]))):
+                    d = res[i] - res[j]
+                    diffs.append(d)
+                    if cov.get(i) is not None and cov.get(j) is not None:
+                        d2.append(float(d @ np.linalg.solve(cov[i] + cov[j], d)))
+            row[f"{scope} noise"] = float(np.sqrt(np.mean(np.square(diffs)) / 2.0))
+            row[f"{scope} cov scale"] = (float(np.sqrt(np.median(d2) / 1.386)) if d2
+                                         else float("nan"))
             # Stereo: the pairs' corners found in both views (and common to all, in that scope).
             obj, il, ir = [], [], []
             for p in pairs:
@@ -198,8 +235,9 @@ def main():
 
     cols = ["corners", "views"] + [f"{s} {c}" for s in ("common", "own")
                                    for c in ("left fit", "left held-out", "right fit",
-                                             "right held-out", "stereo")] + ["ms"]
+                                             "right held-out", "stereo", "noise")] + ["ms"]
     best = {c: min(r[c] for r in rows if r["method"] != OURS[0]) for c in cols[2:-1]}
+    scales = [f"{s} cov scale" for s in ("common", "own")]
     print(f"Corners common to all methods: {sum(len(v) for v in common.values())} in "
           f"{len(images)} photos. RMS in px; ratio: conic-corners-board over the best other.")
     if a.markdown:
@@ -223,6 +261,11 @@ def main():
         print(f"{'ratio':<{width}}  " + "  ".join(
             f"{'':>{max(len(c), 7)}}" if c in ("corners", "views", "ms")
             else f"{board[c] / best[c]:>{max(len(c), 7)}.2f}" for c in cols))
+    print()
+    for r in rows:
+        if not np.isnan(r[scales[0]]):
+            print(f"{r['method']}: covariance scale " + ", ".join(
+                f"{c.split()[0]} corners {r[c]:.2f}" for c in scales))
 
 
 if __name__ == "__main__":
