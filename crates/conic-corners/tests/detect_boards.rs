@@ -470,6 +470,26 @@ fn opencv_stereo_sample_every_corner_labelled_and_both_refiners_agree() {
     assert!(median < 0.1 && largest < 0.6, "{median} {largest}");
 }
 
+/// OpenCV's ChArUco photo (`examples/opencv-charuco`): a printed board of 4 × 6 inner corners
+/// with an ArUco marker in every white square. The markers' own corners and edges are no board
+/// corners: one board of all 24 junctions. (The Python test `test_opencv_stereo.py` checks the
+/// labels against OpenCV's ChArUco detector.)
+#[test]
+fn charuco_markers_in_the_white_squares_are_no_corners() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/opencv-charuco/choriginal.jpg");
+    let image = GrayImage::open(&path).expect("readable photo");
+    let det = detect(&image, &DetectParams::default());
+    assert_eq!(det.boards.len(), 1);
+    let b = &det.boards[0];
+    let mut shape = [b.rows, b.cols];
+    shape.sort();
+    assert_eq!(shape, [4, 6]);
+    let labels: std::collections::HashSet<_> = b.corners.iter().map(|c| (c.row, c.col)).collect();
+    assert_eq!(labels.len(), 24);
+    assert!(b.corners.iter().all(|c| c.status != Status::Failed));
+}
+
 /// The label offsets (whole minus part, with their counts) of a board found in a part of a
 /// photo against the whole photo's board: each corner of `part`, mapped into the photo's pixels
 /// by `to_photo`, is matched to the nearest corner of `whole` if that lies within `tolerance` px.
