@@ -139,12 +139,11 @@ def held_out(views, size):
 
 
 def neighbour_pairs(residuals):
-    """(label, label) of grid neighbours (along rows and columns) with residuals in one view."""
-    for res in residuals:
-        for (r, c) in res:
-            for q in ((r, c + 1), (r + 1, c)):
-                if q in res:
-                    yield res, (r, c), q
+    """(label, label) of grid neighbours (along rows and columns) in one view's residuals."""
+    for (r, c) in residuals:
+        for q in ((r, c + 1), (r + 1, c)):
+            if q in residuals:
+                yield (r, c), q
 
 
 def main():
@@ -203,13 +202,12 @@ def main():
                 cams[side] = (k, dist)
                 row[f"{scope} {side} fit"] = fit
                 row[f"{scope} {side} held-out"], residuals = held_out(views, size)
-                for (res, i, j), cov in zip(neighbour_pairs(residuals), (
-                        cv for res, cv in zip(residuals, view_covs)
-                        for _ in neighbour_pairs([res]))):
-                    d = res[i] - res[j]
-                    diffs.append(d)
-                    if cov.get(i) is not None and cov.get(j) is not None:
-                        d2.append(float(d @ np.linalg.solve(cov[i] + cov[j], d)))
+                for res, cov in zip(residuals, view_covs):
+                    for i, j in neighbour_pairs(res):
+                        d = res[i] - res[j]
+                        diffs.append(d)
+                        if cov.get(i) is not None and cov.get(j) is not None:
+                            d2.append(float(d @ np.linalg.solve(cov[i] + cov[j], d)))
             row[f"{scope} noise"] = float(np.sqrt(np.mean(np.square(diffs)) / 2.0))
             row[f"{scope} cov scale"] = (float(np.sqrt(np.median(d2) / 1.386)) if d2
                                          else float("nan"))
