@@ -44,6 +44,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from board_peers import METHODS as PEERS, run_view  # noqa: E402
+from board_report import match  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROWS, COLS = 6, 9
@@ -89,19 +90,12 @@ def ours(cli, images, mode):
 
 
 def label(points, reference):
-    """Each point matched to the nearest labelled reference corner within MATCH_PX (one each)."""
-    keys = list(reference)
-    if not keys or len(points) == 0:
-        return {}
-    ref = np.array([reference[k] for k in keys])
+    """Each point matched to the nearest labelled reference corner within MATCH_PX, as the
+    curved-board report matches detections to the truth (board_report.match)."""
+    view = {"corners": [{"row": r, "col": c, "x": x, "y": y, "visible": True}
+                        for (r, c), (x, y) in reference.items()]}
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    d = np.linalg.norm(ref[:, None, :] - pts[None, :, :], axis=2)
-    out = {}
-    for i, k in enumerate(keys):
-        j = int(np.argmin(d[i]))
-        if d[i, j] <= MATCH_PX and int(np.argmin(d[:, j])) == i:
-            out[k] = tuple(pts[j])
-    return out
+    return {k: tuple(pts[j]) for k, (_, _, j) in match(view, pts, MATCH_PX).items()}
 
 
 def board_points(keys):
