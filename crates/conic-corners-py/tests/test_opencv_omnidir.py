@@ -7,8 +7,8 @@ the Mei camera that cv2.omnidir calibrates from the other 14 (bench/omnidir_came
 camera held fixed, one board pose must explain every corner of this photo: what it cannot is the
 corners' own error plus what the model leaves out, the same for every detector.
 """
-import json
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -17,75 +17,8 @@ import conic_corners as cc
 
 cv2 = pytest.importorskip("cv2")
 
-PHOTOS = os.path.join(os.path.dirname(__file__), "..", "..", "..", "examples", "opencv-omnidir")
-
-
-def mei_project(obj, pose, K, xi, D):
-    """Mei's unified model: the point on the unit sphere, projected from (0, 0, -xi), then
-    OpenCV's radial and tangential distortion (k1, k2, p1, p2) and K; as cv2.omnidir."""
-    rvec, tvec = pose[:3], pose[3:]
-    R = cv2.Rodrigues(rvec)[0]
-    X = obj @ R.T + tvec
-    s = X / np.linalg.norm(X, axis=1, keepdims=True)
-    x, y = s[:, 0] / (s[:, 2] + xi), s[:, 1] / (s[:, 2] + xi)
-    k1, k2, p1, p2 = D
-    r2 = x * x + y * y
-    radial = 1 + k1 * r2 + k2 * r2 * r2
-    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], 1)
-
-
-def camera_at_half_size():
-    """camera.json (1280 x 960) for the 640 x 480 photo; pixel centres at integers on both
-    sides, so x_half = (x_full - 0.5) / 2."""
-    cam = json.load(open(os.path.join(PHOTOS, "camera.json")))
-    K = np.array(cam["K"]) / 2
-    K[2, 2] = 1
-    K[0, 2] -= 0.25
-    K[1, 2] -= 0.25
-    return K, cam["xi"], np.array(cam["D"])
-
-
-def pose_rms(obj, img, camera):
-    """RMS (px) of the best single pose: started from `cv2.solvePnP` on the points lifted to the
-    unit sphere (distortion ignored) and seen from their mean direction, then
-    Levenberg-Marquardt on all six parameters."""
-    obj = np.asarray(obj, float)
-    img = np.asarray(img, float).reshape(-1, 2)
-    K, xi, _ = camera
-
-    def residual(p):
-        return (mei_project(obj, p, *camera) - img).ravel()
-
-    m = np.linalg.solve(K, np.column_stack([img, np.ones(len(img))]).T).T
-    r2 = m[:, 0] ** 2 + m[:, 1] ** 2
-    f = (xi + np.sqrt(1 + (1 - xi * xi) * r2)) / (r2 + 1)
-    rays = np.column_stack([f * m[:, 0], f * m[:, 1], f - xi])
-    z = rays.mean(0) / np.linalg.norm(rays.mean(0))
-    x = np.cross([0.0, 1.0, 0.0], z)
-    x /= np.linalg.norm(x)
-    turn = np.array([x, np.cross(z, x), z])  # rows: the new frame's axes
-    seen = rays @ turn.T
-    ok, rvec, tvec = cv2.solvePnP(obj, seen[:, :2] / seen[:, 2:], np.eye(3), None)
-    assert ok
-    R = turn.T @ cv2.Rodrigues(rvec)[0]
-    p = np.concatenate([cv2.Rodrigues(R)[0].ravel(), turn.T @ tvec.ravel()])
-    lam = 1e-3
-    for _ in range(200):
-        r = residual(p)
-        J = np.empty((r.size, 6))
-        for k in range(6):
-            dp = np.zeros(6)
-            dp[k] = 1e-6 * max(1.0, abs(p[k]))
-            J[:, k] = (residual(p + dp) - r) / dp[k]
-        A = J.T @ J
-        step = np.linalg.solve(A + lam * np.diag(np.diag(A)), -J.T @ r)
-        if np.sum(residual(p + step) ** 2) < np.sum(r**2):
-            p, lam = p + step, lam / 3
-        else:
-            lam *= 4
-    return float(np.sqrt(np.mean(residual(p).reshape(-1, 2) ** 2) * 2))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "..", "bench"))
+from omnidir_pose import PHOTOS, camera_at_half_size, pose_rms  # noqa: E402
 
 
 def test_the_lens_s_bent_board_fits_one_pose_better_than_with_opencv_s_corners():
