@@ -39,7 +39,7 @@ def test_the_lens_s_bent_board_fits_one_pose_better_than_with_opencv_s_corners()
         w: pose_rms(board, cv2.cornerSubPix(img, found.copy(), (w, w), (-1, -1), criteria), camera)
         for w in (3, 5, 7)
     }
-    # Measured: 0.214 px (0.213 with refine="local") against cornerSubPix's 0.500 / 0.234 /
+    # Measured: 0.208 px (0.213 with refine="local") against cornerSubPix's 0.500 / 0.234 /
     # 0.232 px (windows 3 / 5 / 7); the tutorial's own points of this view, found at full size
     # and halved, give 0.515 px. The camera model's own floor is most of all of them.
     assert ours < 0.23, (ours, opencv)

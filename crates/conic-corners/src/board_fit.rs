@@ -648,9 +648,10 @@ const DENSE_SCANLINES: f64 = 12.0;
 /// Samples behind each prediction.
 const PREDICT_SAMPLES: usize = 16;
 
-/// Walks one edge (see [`Walk`]), appending sample points to `out` and, if given, their normal
-/// sigmoid widths to `widths`. A sample is accepted when its fit succeeds, it lies near the
-/// predicted crossing, has the walk's polarity and a contrast within 0.4–2.5× that of the first
+/// Walks one edge (see [`Walk`]), appending sample points to `out` and, if given, the normal
+/// sigmoid widths of those fitted with a free width (not in windows cut short by a crossing
+/// edge) to `widths`. A sample is accepted when its fit succeeds, it lies near the predicted
+/// crossing, has the walk's polarity and a contrast within 0.4–2.5× that of the first
 /// samples, or, on an open walk with a reference, matches the reference's [`Levels`]. Returns
 /// the levels of the first and of the last [`LEVEL_SAMPLES`] accepted samples.
 fn walk_edge(
@@ -770,7 +771,10 @@ fn walk_edge(
             r.push(s.fit.rms);
         }
         out.push(s.point);
-        if let Some(wd) = widths.as_deref_mut() {
+        // A window cut short by a crossing edge fits with the assumed width, which says nothing
+        // of the blur: on a board turned by 45° nearly every pilot sample is cut short, and
+        // their widths made the measured blur the pilot's guess (2 px where it was 0.8).
+        if let Some(wd) = widths.as_deref_mut().filter(|_| !clash) {
             wd.push(s.normal_width(d));
         }
         let recent = &out[first.max(out.len().saturating_sub(PREDICT_SAMPLES))..];
@@ -864,24 +868,28 @@ fn segment_walk(grid: &Grid, a: usize, b: usize, k: usize) -> Option<Walk> {
 }
 
 /// Blur σ from a pilot walk (free sigmoid widths, generous windows) over up to eight segments
-/// near the middle of the longest line.
+/// near the middle of the longest line. The windows and the junctions' clearances follow a
+/// guessed blur of 2 px; where that leaves fewer than 8 windows clear of the crossing edges
+/// (squares of 20 px and less, turned 30–45° against the scanlines, or shorter), a guess of
+/// 1 px is tried.
 fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
-    let cfg = WalkConfig::new(2.0, stride);
     let line = grid.lines.iter().max_by_key(|l| l.corners.len())?;
     let k = usize::from(line.kind == LineKind::Column);
     let mid = line.corners.len() / 2;
-    let (mut pts, mut widths) = (Vec::new(), Vec::new());
     let lo = mid.saturating_sub(4);
-    for j in lo..(lo + 8).min(line.corners.len() - 1) {
-        if let Some(mut w) = segment_walk(grid, line.corners[j], line.corners[j + 1], k) {
-            w.limit -= cfg.start;
-            walk_edge(image, &w, &cfg, &mut pts, Some(&mut widths), None);
+    [2.0, 1.0, 0.5].into_iter().find_map(|guess| {
+        let cfg = WalkConfig::new(guess, stride);
+        let (mut pts, mut widths) = (Vec::new(), Vec::new());
+        for j in lo..(lo + 8).min(line.corners.len() - 1) {
+            if let Some(mut w) = segment_walk(grid, line.corners[j], line.corners[j + 1], k) {
+                w.limit -= cfg.start;
+                walk_edge(image, &w, &cfg, &mut pts, Some(&mut widths), None);
+            }
         }
-    }
-    if widths.len() < 8 {
-        return None;
-    }
-    blur_sigma_from_widths(&widths)
+        (widths.len() >= 8)
+            .then(|| blur_sigma_from_widths(&widths))
+            .flatten()
+    })
 }
 
 /// A line's edge samples in chain order, and the chain position of each of its corners:
