@@ -870,8 +870,8 @@ fn segment_walk(grid: &Grid, a: usize, b: usize, k: usize) -> Option<Walk> {
 /// Blur σ from a pilot walk (free sigmoid widths, generous windows) over up to eight segments
 /// near the middle of the longest line. The windows and the junctions' clearances follow a
 /// guessed blur of 2 px; where that leaves fewer than 8 windows clear of the crossing edges
-/// (squares of 20 px and less, or 30 px turned by 45° against the scanlines), guesses of 1 and
-/// then 0.5 px are tried.
+/// (squares of 15–20 px in the turned renders of BENCHMARKS.md, where 15 px squares turned by
+/// 40–45° needed the last), guesses of 1 and then 0.5 px are tried.
 fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
     let line = grid.lines.iter().max_by_key(|l| l.corners.len())?;
     let k = usize::from(line.kind == LineKind::Column);
