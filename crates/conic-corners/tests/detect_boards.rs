@@ -457,6 +457,35 @@ fn real_photos_when_present() {
     }
 }
 
+/// Asserts that `det` holds exactly one board of `shape` (rows and columns in either order) with
+/// `count` distinct labels, none of them unplaced.
+fn assert_one_board(det: &Detection, shape: [usize; 2], count: usize, what: &str) {
+    assert_eq!(det.boards.len(), 1, "{what}");
+    let b = &det.boards[0];
+    let mut s = [b.rows, b.cols];
+    s.sort();
+    assert_eq!(s, shape, "{what}");
+    let labels: std::collections::HashSet<_> = b.corners.iter().map(|c| (c.row, c.col)).collect();
+    assert_eq!(labels.len(), count, "{what}");
+    assert!(
+        b.corners.iter().all(|c| c.status != Status::Failed),
+        "{what}"
+    );
+}
+
+/// Distance (px) between the two boards' corners of each label of `a` (both boards carry the
+/// same labels: one image in two refine modes).
+fn label_gaps<'a>(a: &'a Board, b: &'a Board) -> impl Iterator<Item = f64> + 'a {
+    a.corners.iter().map(move |c| {
+        let o = b
+            .corners
+            .iter()
+            .find(|o| (o.row, o.col) == (c.row, c.col))
+            .expect("same labels in both modes");
+        (c.x - o.x).hypot(c.y - o.y)
+    })
+}
+
 /// OpenCV's stereo calibration sample (`examples/opencv-stereo`): 26 JPEG photos, 640 × 480, of
 /// a flat board of 9 × 6 inner corners. Every corner is found and labelled in every photo, and
 /// the two refine modes agree (measured: median 0.044 px, largest 0.35 px).
@@ -481,24 +510,9 @@ fn opencv_stereo_sample_every_corner_labelled_and_both_refiners_agree() {
         let board = detect(&image, &DetectParams::default());
         let other = detect(&image, &local);
         for det in [&board, &other] {
-            assert_eq!(det.boards.len(), 1, "{}", path.display());
-            let b = &det.boards[0];
-            let mut shape = [b.rows, b.cols];
-            shape.sort();
-            assert_eq!(shape, [6, 9], "{}", path.display());
-            let labels: std::collections::HashSet<_> =
-                b.corners.iter().map(|c| (c.row, c.col)).collect();
-            assert_eq!(labels.len(), 54, "{}", path.display());
-            assert!(b.corners.iter().all(|c| c.status != Status::Failed));
+            assert_one_board(det, [6, 9], 54, &path.display().to_string());
         }
-        for c in &board.boards[0].corners {
-            let o = other.boards[0]
-                .corners
-                .iter()
-                .find(|o| (o.row, o.col) == (c.row, c.col))
-                .expect("same labels in both modes");
-            gaps.push((c.x - o.x).hypot(c.y - o.y));
-        }
+        gaps.extend(label_gaps(&board.boards[0], &other.boards[0]));
     }
     gaps.sort_by(f64::total_cmp);
     let (median, largest) = (gaps[gaps.len() / 2], gaps[gaps.len() - 1]);
@@ -516,14 +530,7 @@ fn charuco_markers_in_the_white_squares_are_no_corners() {
         .join("../../examples/opencv-charuco/choriginal.jpg");
     let image = GrayImage::open(&path).expect("readable photo");
     let det = detect(&image, &DetectParams::default());
-    assert_eq!(det.boards.len(), 1);
-    let b = &det.boards[0];
-    let mut shape = [b.rows, b.cols];
-    shape.sort();
-    assert_eq!(shape, [4, 6]);
-    let labels: std::collections::HashSet<_> = b.corners.iter().map(|c| (c.row, c.col)).collect();
-    assert_eq!(labels.len(), 24);
-    assert!(b.corners.iter().all(|c| c.status != Status::Failed));
+    assert_one_board(&det, [4, 6], 24, "choriginal.jpg");
 }
 
 /// OpenCV's omnidirectional camera sample (`examples/opencv-omnidir`): a flat board of 6 × 9 inner
@@ -553,28 +560,9 @@ fn opencv_omnidir_sample_bent_grid_lines_every_corner_inside_labelled() {
         let board = detect(&image, &DetectParams::default());
         let other = detect(&image, &local);
         for det in [&board, &other] {
-            assert_eq!(det.boards.len(), 1, "{name}");
-            let b = &det.boards[0];
-            let mut s = [b.rows, b.cols];
-            s.sort();
-            assert_eq!(s, shape, "{name}");
-            let labels: std::collections::HashSet<_> =
-                b.corners.iter().map(|c| (c.row, c.col)).collect();
-            assert_eq!(labels.len(), count, "{name}");
-            assert!(b.corners.iter().all(|c| c.status != Status::Failed));
+            assert_one_board(det, shape, count, name);
         }
-        let mut gaps: Vec<f64> = board.boards[0]
-            .corners
-            .iter()
-            .map(|c| {
-                let o = other.boards[0]
-                    .corners
-                    .iter()
-                    .find(|o| (o.row, o.col) == (c.row, c.col))
-                    .expect("same labels in both modes");
-                (c.x - o.x).hypot(c.y - o.y)
-            })
-            .collect();
+        let mut gaps: Vec<f64> = label_gaps(&board.boards[0], &other.boards[0]).collect();
         gaps.sort_by(f64::total_cmp);
         let (median, largest) = (gaps[gaps.len() / 2], gaps[gaps.len() - 1]);
         eprintln!("{name}: board against local: median {median:.4} px, largest {largest:.4} px");
