@@ -110,10 +110,14 @@ def pose_residuals(obj, img, camera):
     return -residual(p).reshape(-1, 2)
 
 
+def residual_rms(e):
+    """RMS (px) of the lengths of residuals `e` (N x 2), as cv2.calibrateCamera reports it."""
+    return float(np.sqrt(2 * np.mean(np.square(e))))
+
+
 def pose_rms(obj, img, camera):
-    """RMS (px) of the residuals' lengths of the best single board pose (cv2.calibrateCamera's
-    RMS)."""
-    return float(np.sqrt(2 * np.mean(pose_residuals(obj, img, camera) ** 2)))
+    """residual_rms of the best single board pose."""
+    return residual_rms(pose_residuals(obj, img, camera))
 
 
 def ours(cli, mode):
@@ -168,7 +172,7 @@ def main():
             e = pose_residuals(obj, np.array([own[k] for k in keys]), camera)
             res = dict(zip(keys, e))
             diffs = [res[i] - res[j] for i, j in neighbour_pairs(res)]
-            row.append(f"{np.sqrt(2 * np.mean(e ** 2)):.4f} / "
+            row.append(f"{residual_rms(e):.4f} / "
                        f"{np.sqrt(np.mean(np.square(diffs)) / 2):.4f}")
         rows.append(row)
     head = ["method"] + [f"{n}: returned / on our board" for n in IMAGES] + [
