@@ -9,14 +9,14 @@ use crate::completion::{
 };
 use crate::connectivity::{
     connect_seen, label_with, merge_split_boards, Board as LabelledBoard, ConnectivityParams,
-    LabelParams,
+    Graph, LabelParams,
 };
 use crate::election::{elect_scales, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::prefilter::{prefilter_scales, PrefilterParams, Scales};
 use crate::quadratic_form::worst_sigma;
-use crate::refine::{refine_one, RefineParams, Status};
+use crate::refine::{refine_one_among, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
 use crate::GrayImage;
 use nalgebra::{Matrix2, Vector2};
@@ -364,9 +364,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                                 .is_some_and(|s| s > params.junction_gate * typical_sigma) =>
                         {
                             match junction_corner(image, &corners, b, i, c, j, false) {
-                                // Where they disagree, the one that claims the smaller σ.
+                                // Where they disagree, the one that claims the smaller σ along
+                                // their difference.
                                 Some(jc) => fuse(c, jc).unwrap_or_else(|| {
-                                    if sigma_of(&jc) < sigma_of(&c) {
+                                    if surer_along_difference(&jc, &c) {
                                         jc
                                     } else {
                                         c
@@ -378,11 +379,9 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         _ => c,
                     };
                 }
-                let reach = match graph.neighbours.get(i) {
-                    Some(nb) => neighbour_reach(&corners, nb, i),
-                    None => label_reach(&corners, b, i),
-                };
-                let mut local = refine_corner(image, &corners[i], row, col, reach, &params.refine);
+                let neighbours = neighbour_points(&corners, &graph, b, i);
+                let mut local =
+                    refine_corner(image, &corners[i], row, col, &neighbours, &params.refine);
                 // The refiner failed at the pixel-level position, which can be off the junction
                 // (a pen stroke through it moves the election's maximum): it gets two more
                 // starts, where the board's curves meet (when that was too far from the pixel
@@ -401,7 +400,8 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     let mut starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
                     let confirmed = starts.find_map(|[x, y]| {
                         let start = Corner { x, y, ..corners[i] };
-                        let again = refine_corner(image, &start, row, col, reach, &params.refine);
+                        let again =
+                            refine_corner(image, &start, row, col, &neighbours, &params.refine);
                         (again.status == Status::Converged
                             && (again.x - x).hypot(again.y - y) <= params.board_fit.max_shift
                             && nearest_is_own(&corners, b, i, [again.x, again.y]))
@@ -636,15 +636,35 @@ fn neighbour_prediction(
     (n > 0.0).then(|| [sum[0] / n, sum[1] / n])
 }
 
-/// The distance to the farthest grid neighbour: an edge walk has no business beyond it (it would
-/// stop at the neighbour anyway, where the edge changes polarity).
-fn neighbour_reach(corners: &[Corner], neighbours: &[Option<usize>; 4], i: usize) -> Option<f64> {
-    let c = &corners[i];
-    neighbours
-        .iter()
-        .flatten()
-        .map(|&j| (corners[j].x - c.x).hypot(corners[j].y - c.y))
-        .max_by(f64::total_cmp)
+/// The pixel-level positions of corner `i`'s grid neighbours: its links in the graph, or for a
+/// corner added by grid completion (it has no links) its labelled 4-neighbours on the board. The
+/// local refiner's walks stop before their crossing edges ([`refine_one_among`]) and go no
+/// farther than the farthest of them (a walk would stop at that neighbour anyway, where the edge
+/// changes polarity).
+fn neighbour_points(
+    corners: &[Corner],
+    graph: &Graph,
+    board: &LabelledBoard,
+    i: usize,
+) -> Vec<[f64; 2]> {
+    let at = |j: usize| [corners[j].x, corners[j].y];
+    let points: Vec<[f64; 2]> = match graph.neighbours.get(i) {
+        Some(nb) => nb.iter().flatten().map(|&j| at(j)).collect(),
+        None => match board.corners.iter().position(|&j| j == i) {
+            Some(k) => {
+                let (r, c) = board.labels[k];
+                board
+                    .corners
+                    .iter()
+                    .zip(&board.labels)
+                    .filter(|(_, &(lr, lc))| (lr - r).abs() + (lc - c).abs() == 1)
+                    .map(|(&j, _)| at(j))
+                    .collect()
+            }
+            None => Vec::new(),
+        },
+    };
+    points
 }
 
 /// Whether `q` (image coordinates) lies nearer the pixel-level position of `corners[i]` than of
@@ -655,21 +675,6 @@ fn nearest_is_own(corners: &[Corner], board: &LabelledBoard, i: usize, q: [f64; 
     let d = |j: usize| (corners[j].x - q[0]).hypot(corners[j].y - q[1]);
     let own = d(i);
     board.corners.iter().all(|&j| j == i || d(j) > own)
-}
-
-/// [`neighbour_reach`] for a corner added by grid completion (it has no graph links): the
-/// distance to its farthest labelled 4-neighbour on the board.
-fn label_reach(corners: &[Corner], board: &LabelledBoard, i: usize) -> Option<f64> {
-    let k = board.corners.iter().position(|&j| j == i)?;
-    let (r, c) = board.labels[k];
-    let c0 = &corners[i];
-    board
-        .corners
-        .iter()
-        .zip(&board.labels)
-        .filter(|(_, &(lr, lc))| (lr - r).abs() + (lc - c).abs() == 1)
-        .map(|(&j, _)| (corners[j].x - c0.x).hypot(corners[j].y - c0.y))
-        .max_by(f64::total_cmp)
 }
 
 /// `c` placed by the gradient estimate started from its position, if that converges.
@@ -717,6 +722,26 @@ const CLEAR_GRADIENT_RADII: f64 = 4.0;
 /// A corner's σ, infinite where it has none (refinement failed).
 fn sigma_of(c: &DetectedCorner) -> f64 {
     c.sigma.unwrap_or(f64::INFINITY)
+}
+
+/// Whether `a` claims a smaller variance than `b` along the direction of their difference (by
+/// their worst-direction σ where that is undefined). Where two estimates disagree it is along
+/// that direction, and each may know it well or poorly whatever its worst direction: a corner
+/// beside a silhouette is poorly placed by its board answer along the foreshortened curve and
+/// well across it.
+fn surer_along_difference(a: &DetectedCorner, b: &DetectedCorner) -> bool {
+    let d = [a.x - b.x, a.y - b.y];
+    let along = |c: &DetectedCorner| {
+        c.cov.map(|m| {
+            d[0] * d[0] * m[0][0] + d[0] * d[1] * (m[0][1] + m[1][0]) + d[1] * d[1] * m[1][1]
+        })
+    };
+    match (along(a), along(b)) {
+        (Some(va), Some(vb)) if va.is_finite() && vb.is_finite() && d[0].hypot(d[1]) > 0.0 => {
+            va < vb
+        }
+        _ => sigma_of(a) < sigma_of(b),
+    }
 }
 
 /// A 2×2 covariance (px², image axes).
@@ -849,14 +874,18 @@ fn refine_corner(
     c: &Corner,
     row: i32,
     col: i32,
-    reach: Option<f64>,
+    neighbours: &[[f64; 2]],
     params: &RefineParams,
 ) -> DetectedCorner {
+    let reach = neighbours
+        .iter()
+        .map(|n| (n[0] - c.x).hypot(n[1] - c.y))
+        .max_by(f64::total_cmp);
     let params = RefineParams {
         reach: reach.map_or(params.reach, |r| r.clamp(5.0, params.reach)),
         ..params.clone()
     };
-    let r = refine_one(image, [c.x, c.y], &params);
+    let r = refine_one_among(image, [c.x, c.y], neighbours, &params);
     DetectedCorner {
         x: r.x,
         y: r.y,
