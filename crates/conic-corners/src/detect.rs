@@ -946,6 +946,41 @@ mod tests {
     }
 
     #[test]
+    fn a_disagreement_goes_to_the_estimate_surer_along_it() {
+        let at = |x: f64, y: f64, cov: Cov| DetectedCorner {
+            x,
+            y,
+            row: 0,
+            col: 0,
+            score: 1.0,
+            status: Status::Converged,
+            residual: None,
+            path: Path::Board,
+            sigma: Some(worst_sigma(cov)),
+            cov: Some(cov),
+        };
+        // As at a boundary corner beside a silhouette: the board answer knows x to 0.007 px and
+        // y to 0.015, the junction model both to 0.011; they differ by 0.074 px in x. The
+        // worst-direction σ would take the junction model's answer.
+        let board = at(169.160, 325.643, [[4.9e-5, 0.0], [0.0, 2.3e-4]]);
+        let junction = at(169.234, 325.642, [[1.2e-4, 0.0], [0.0, 1.2e-4]]);
+        assert!(fuse(board, junction).is_none());
+        assert!(sigma_of(&junction) < sigma_of(&board));
+        assert!(surer_along_difference(&board, &junction));
+        assert!(!surer_along_difference(&junction, &board));
+        // Apart along y, the junction model is the surer.
+        let below = at(169.160, 325.75, [[1.2e-4, 0.0], [0.0, 1.2e-4]]);
+        assert!(surer_along_difference(&below, &board));
+        // Without covariances, or at the same point: by the worst-direction σ.
+        let bare = |c: DetectedCorner| DetectedCorner { cov: None, ..c };
+        assert!(surer_along_difference(&bare(junction), &bare(board)));
+        assert!(surer_along_difference(
+            &at(169.160, 325.643, [[1e-4, 0.0], [0.0, 1e-4]]),
+            &board
+        ));
+    }
+
+    #[test]
     fn dropping_unplaced_corners_keeps_labels_canonical() {
         let corner = |row, col, status| DetectedCorner {
             x: col as f64,

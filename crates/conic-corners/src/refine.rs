@@ -985,6 +985,40 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_neighbour_with_none_opposite_is_mirrored_through_the_corner() {
+        let c = [5.0, 5.0];
+        // Left and right on one (bent) grid line, and one below with none above.
+        let nb = [[15.0, 5.0], [-4.0, 8.0], [5.0, 15.0]];
+        let m = mirrored(c, &nb);
+        assert_eq!(m.len(), 1);
+        assert!((m[0][0] - 5.0).abs() < 1e-12 && (m[0][1] + 5.0).abs() < 1e-12);
+        // Complete sets have no mirrors; a lone corner has none either.
+        assert!(mirrored(c, &[[15.0, 5.0], [-5.0, 5.0], [5.0, 15.0], [5.0, -5.0]]).is_empty());
+        assert!(mirrored(c, &[]).is_empty());
+    }
+
+    #[test]
+    fn a_window_touches_a_line_by_its_distance_across_it() {
+        let (p, down) = ([0.0, 0.0], [0.0, 1.0]);
+        // A row window: its ends are 7 and 13 px right of the vertical line.
+        assert!(!window_touches([10.0, 5.0], Axis::X, 3.0, p, down, 2.0));
+        assert!(window_touches([10.0, 5.0], Axis::X, 3.0, p, down, 7.0));
+        // One that straddles it.
+        assert!(window_touches([1.0, 5.0], Axis::X, 3.0, p, down, 0.5));
+        // A column window parallel to the line, 1.5 px beside it over its whole length (where
+        // the scanline never crosses the line).
+        assert!(window_touches([1.5, 5.0], Axis::Y, 20.0, p, down, 2.0));
+        assert!(!window_touches([3.0, 5.0], Axis::Y, 20.0, p, down, 2.0));
+        // A 45° line: the row window at (10, 0) reaches x = 7, 7 / √2 ≈ 4.95 px across it.
+        let diag = [
+            std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ];
+        assert!(!window_touches([10.0, 0.0], Axis::X, 3.0, p, diag, 4.9));
+        assert!(window_touches([10.0, 0.0], Axis::X, 3.0, p, diag, 5.0));
+    }
+
+    #[test]
     fn ring_bilinear_matches_the_image() {
         let (w, h) = (13, 9);
         let data: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 101) as f32 * 0.7).collect();

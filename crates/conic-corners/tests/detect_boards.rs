@@ -180,7 +180,9 @@ fn flat_board_random_pose() {
 /// short. The board-wide fit measures the blur on windows clear of the crossing edges: before
 /// it did, the cut windows' assumed widths made the blur 2 px at 45° (1 px rendered), and board
 /// mode was 0.025 / 0.051 px off at 40° / 45° (0.011–0.014 px at 0–30°). Measured now:
-/// 0.011–0.016 px at every angle; the local refiner 0.026–0.053 px.
+/// 0.011–0.016 px at every angle. The local refiner's walks end before their neighbours'
+/// crossing edges, which their windows reach near a junction on a turned board: 0.024–0.035 px
+/// (0.026 / 0.033 / 0.053 / 0.040 / 0.033 px at these angles before).
 #[test]
 fn board_turned_in_its_plane_keeps_its_accuracy() {
     let local = DetectParams {
@@ -205,7 +207,7 @@ fn board_turned_in_its_plane_keeps_its_accuracy() {
             let det = detect(&r.image, &params);
             let o = check(&format!("turned {degrees}°, {mode}"), &det, &r.corners);
             assert_eq!(o.missing, 0, "{degrees}° {mode}");
-            let bound = if mode == "board" { 0.02 } else { 0.08 };
+            let bound = if mode == "board" { 0.02 } else { 0.045 };
             assert!(o.rms < bound, "{degrees}° {mode}: RMS {}", o.rms);
         }
     }

@@ -167,7 +167,11 @@ fn unusable_points_and_images_fail_per_point() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
     /// The method only looks at intensity differences and ratios: an affine change of the
-    /// intensities (gain > 0, offset) leaves the refined corner where it was.
+    /// intensities (gain > 0, offset) leaves the refined corner where it was. Up to rounding:
+    /// the f32 sums of a scaled profile differ in their last bits, and a sample at the edge of
+    /// an acceptance test can flip (gain 0.2, offset 43.8, seed 701: 261 against 262 samples,
+    /// 0.008 px apart with σ 0.045 px). Then the answers may differ by what one sample of
+    /// hundreds moves them, a fraction of their σ.
     #[test]
     fn refinement_is_invariant_to_gain_and_offset(gain in 0.2f32..50.0, offset in -100f32..100.0, seed in 0u64..1000) {
         let (img, truth) = render(Protocol::Curvature, 2e-3, seed);
@@ -179,7 +183,14 @@ proptest! {
         let a = refine_one(&img, rounded(truth), &params);
         let b = refine_one(&scaled, rounded(truth), &params);
         prop_assert_eq!(a.status, b.status);
-        prop_assert!((a.x - b.x).abs() < 1e-3 && (a.y - b.y).abs() < 1e-3, "{:?} vs {:?}", a, b);
+        let apart = (a.x - b.x).hypot(a.y - b.y);
+        if a.samples == b.samples {
+            prop_assert!((a.x - b.x).abs() < 1e-3 && (a.y - b.y).abs() < 1e-3, "{:?} vs {:?}", a, b);
+        } else {
+            prop_assert!(a.samples.abs_diff(b.samples) <= 2, "{:?} vs {:?}", a, b);
+            let sigma = a.sigma.unwrap_or(0.0).min(b.sigma.unwrap_or(0.0));
+            prop_assert!(apart < 0.5 * sigma, "{:?} vs {:?}", a, b);
+        }
     }
 }
 
