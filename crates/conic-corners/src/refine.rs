@@ -146,7 +146,8 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
 }
 
 /// [`refine_one`] for a corner of a board whose neighbouring corners are near `neighbours`
-/// (image coordinates, pixel-level positions suffice). Each ray's walk ends before its profile
+/// (image coordinates, pixel-level positions suffice). In the measuring pass (not the pilot,
+/// see [`Ends::NONE`]) each ray's walk ends before its profile
 /// windows reach the crossing edge of a neighbour ahead of it (one within 45° of the ray,
 /// that edge taken parallel to the corner's own crossing edge). Without this a walk runs on
 /// until its samples change polarity beyond the neighbour, and on a board turned by 45° in
@@ -200,7 +201,7 @@ pub fn refine_one_among(
     );
     let mut found = None;
     for directions in direction_candidates(image, start) {
-        walks.walk_all(image, start, directions, &ends, &pilot);
+        walks.walk_all(image, start, directions, &Ends::NONE, &pilot);
         match walks.solve(start, params, None) {
             Some(sol) if dist(sol.point, start) <= params.max_shift => {
                 found = Some((sol.point, sol.directions.unwrap_or(directions)));
@@ -893,6 +894,17 @@ const PREDICT_SAMPLES: usize = 24;
 struct Ends<'a> {
     neighbours: &'a [[f64; 2]],
     beyond: &'a [[f64; 2]],
+}
+
+impl Ends<'_> {
+    /// For the pilot pass, whose windows follow a guessed blur: at a guess of 2 px they are
+    /// ±13 px wide on a board turned by 45°, and with its walks ended before the neighbours'
+    /// crossing edges a 30 px square left them one sample each. Ended by the polarity change
+    /// beyond a neighbour instead, they keep enough for a first corner and the blur.
+    const NONE: Ends<'static> = Ends {
+        neighbours: &[],
+        beyond: &[],
+    };
 }
 
 /// The mirror images through `corner` of the `neighbours` that have none on the opposite side
