@@ -82,8 +82,9 @@
 //!    expected-dark ones by at least `min_contrast_rel` times the board's median; (b) correlate with
 //!    the ideal junction of the expected phase (normalized cross-correlation) at least `min_ncc`
 //!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
-//!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one`] (reach one
-//!    step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an occluder cut
+//!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one_among`]
+//!    (reach one step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an
+//!    occluder cut
 //!    the edges) to a corner that is not [`Status::Failed`], or failing that by the gradient
 //!    estimate ([`crate::gradient`]: blurred or foreshortened junctions, as in the outer ring of
 //!    a bent board, leave the edge walks nothing to fit) where the junction model confirms it
@@ -91,8 +92,9 @@
 //!    the junction model started at the search's position, else by the unconfirmed gradient
 //!    estimate, within `max_offset` steps of `p̂`. A
 //!    site outside the board's current label range, verified in the full frame, grows the
-//!    board: it needs a converged (two-sided) answer of [`refine_one`] or the junction model's
-//!    confirmation, since a border square's outer corner next to an occluder passes (a) and (b).
+//!    board: it needs a converged (two-sided) answer of [`refine_one_among`] or the junction
+//!    model's confirmation, since a border square's outer corner next to an occluder passes (a)
+//!    and (b).
 //! 4. **Acceptance.** A verified corner more than half a step from every corner of every board
 //!    (the offset's length in the site's mean steps `u`, `v`: a sliver's corner lies nearer its
 //!    neighbour than half the mean step) is appended to `corners` (angles from `u` and `v`, score
@@ -111,7 +113,7 @@ use crate::connectivity::{board_from, line_diff, Board, ConnectivityParams};
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
-use crate::refine::{refine_one, RefineParams, Status};
+use crate::refine::{refine_one_among, RefineParams, Status};
 use crate::segmentation::median_in_place;
 use crate::GrayImage;
 use rayon::prelude::*;
@@ -1057,8 +1059,12 @@ fn complete_one(
                     max_shift,
                     ..params.refine.clone()
                 };
+                // A board's refiner (one guess of the blur): where it fails, the gradient estimate
+                // and the junction model below take over, and the walks' smaller guesses would
+                // accept more sites that are no junction.
                 let refined = REACHES.into_iter().find_map(|k| {
-                    let r = refine_one(image, q, &refine_at(k, params.max_offset * step));
+                    let r =
+                        refine_one_among(image, q, &[], &refine_at(k, params.max_offset * step));
                     (r.status != Status::Failed).then_some(([r.x, r.y], r.status))
                 });
                 let last_resort = || {
@@ -1074,7 +1080,7 @@ fn complete_one(
                 // walks, started from the corner, must come back to it.
                 let confirmed = |z: P| {
                     REACHES.into_iter().any(|k| {
-                        refine_one(image, z, &refine_at(k, SLIVER_CONFIRM_SHIFT)).status
+                        refine_one_among(image, z, &[], &refine_at(k, SLIVER_CONFIRM_SHIFT)).status
                             != Status::Failed
                     })
                 };
