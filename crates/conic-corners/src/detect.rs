@@ -901,9 +901,9 @@ fn refine_corner(
 mod tests {
     use super::*;
 
-    #[test]
-    fn fusion_takes_each_direction_from_the_estimate_that_knows_it() {
-        let at = |x: f64, y: f64, cov: Cov| DetectedCorner {
+    /// A converged board answer at `(x, y)` with covariance `cov`.
+    fn at(x: f64, y: f64, cov: Cov) -> DetectedCorner {
+        DetectedCorner {
             x,
             y,
             row: 0,
@@ -914,7 +914,11 @@ mod tests {
             path: Path::Board,
             sigma: Some(worst_sigma(cov)),
             cov: Some(cov),
-        };
+        }
+    }
+
+    #[test]
+    fn fusion_takes_each_direction_from_the_estimate_that_knows_it() {
         // The board answer is sure of y (its row curve) and not of x (an extrapolated column
         // curve); the junction model the other way round.
         let board = at(10.3, 20.0, [[0.09, 0.0], [0.0, 1e-4]]);
@@ -947,18 +951,6 @@ mod tests {
 
     #[test]
     fn a_disagreement_goes_to_the_estimate_surer_along_it() {
-        let at = |x: f64, y: f64, cov: Cov| DetectedCorner {
-            x,
-            y,
-            row: 0,
-            col: 0,
-            score: 1.0,
-            status: Status::Converged,
-            residual: None,
-            path: Path::Board,
-            sigma: Some(worst_sigma(cov)),
-            cov: Some(cov),
-        };
         // As at a boundary corner beside a silhouette: the board answer knows x to 0.007 px and
         // y to 0.015, the junction model both to 0.011; they differ by 0.074 px in x. The
         // worst-direction σ would take the junction model's answer.

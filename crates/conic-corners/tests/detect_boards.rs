@@ -175,6 +175,20 @@ fn flat_board_random_pose() {
     }
 }
 
+/// The template board facing a VGA camera from 545 mm (squares of about 22 px), turned by
+/// `degrees` in its own plane.
+fn turned_scene(degrees: f64) -> BoardScene {
+    let turn = nalgebra::UnitQuaternion::from_axis_angle(
+        &nalgebra::Vector3::z_axis(),
+        degrees.to_radians(),
+    );
+    BoardScene {
+        camera: vga(),
+        pose: nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(0.0, 0.0, 545.0), turn),
+        ..template()
+    }
+}
+
 /// A flat board turned in its own plane, squares of 22 px (640 × 480): the edges cross the
 /// scanlines obliquely, and near every junction the crossing edge cuts the profile windows
 /// short. The board-wide fit measures the blur on windows clear of the crossing edges: before
@@ -190,19 +204,9 @@ fn board_turned_in_its_plane_keeps_its_accuracy() {
         ..DetectParams::default()
     };
     for (k, degrees) in [0.0f64, 15.0, 30.0, 40.0, 45.0].into_iter().enumerate() {
-        let turn = nalgebra::UnitQuaternion::from_axis_angle(
-            &nalgebra::Vector3::z_axis(),
-            degrees.to_radians(),
-        );
-        let s = BoardScene {
-            camera: vga(),
-            pose: nalgebra::Isometry3::from_parts(
-                nalgebra::Translation3::new(0.0, 0.0, 545.0),
-                turn,
-            ),
-            ..template()
-        };
-        let r = s.render(30 + k as u64).expect("valid scene");
+        let r = turned_scene(degrees)
+            .render(30 + k as u64)
+            .expect("valid scene");
         for (mode, params) in [("board", DetectParams::default()), ("local", local.clone())] {
             let det = detect(&r.image, &params);
             let o = check(&format!("turned {degrees}°, {mode}"), &det, &r.corners);
@@ -1372,19 +1376,9 @@ fn robustness_report() {
 fn refine_places_the_corners_of_small_turned_squares() {
     use conic_corners::refine::{refine, RefineParams};
     for (k, degrees) in [0.0f64, 15.0, 30.0, 45.0].into_iter().enumerate() {
-        let turn = nalgebra::UnitQuaternion::from_axis_angle(
-            &nalgebra::Vector3::z_axis(),
-            degrees.to_radians(),
-        );
-        let s = BoardScene {
-            camera: vga(),
-            pose: nalgebra::Isometry3::from_parts(
-                nalgebra::Translation3::new(0.0, 0.0, 545.0),
-                turn,
-            ),
-            ..template()
-        };
-        let r = s.render(40 + k as u64).expect("valid scene");
+        let r = turned_scene(degrees)
+            .render(40 + k as u64)
+            .expect("valid scene");
         let truth: Vec<[f64; 2]> = r
             .corners
             .iter()
