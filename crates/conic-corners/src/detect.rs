@@ -648,23 +648,20 @@ fn neighbour_points(
     i: usize,
 ) -> Vec<[f64; 2]> {
     let at = |j: usize| [corners[j].x, corners[j].y];
-    let points: Vec<[f64; 2]> = match graph.neighbours.get(i) {
-        Some(nb) => nb.iter().flatten().map(|&j| at(j)).collect(),
-        None => match board.corners.iter().position(|&j| j == i) {
-            Some(k) => {
-                let (r, c) = board.labels[k];
-                board
-                    .corners
-                    .iter()
-                    .zip(&board.labels)
-                    .filter(|(_, &(lr, lc))| (lr - r).abs() + (lc - c).abs() == 1)
-                    .map(|(&j, _)| at(j))
-                    .collect()
-            }
-            None => Vec::new(),
-        },
+    if let Some(nb) = graph.neighbours.get(i) {
+        return nb.iter().flatten().map(|&j| at(j)).collect();
+    }
+    let Some(k) = board.corners.iter().position(|&j| j == i) else {
+        return Vec::new();
     };
-    points
+    let (r, c) = board.labels[k];
+    board
+        .corners
+        .iter()
+        .zip(&board.labels)
+        .filter(|(_, &(lr, lc))| (lr - r).abs() + (lc - c).abs() == 1)
+        .map(|(&j, _)| at(j))
+        .collect()
 }
 
 /// Whether `q` (image coordinates) lies nearer the pixel-level position of `corners[i]` than of

@@ -175,8 +175,8 @@ pub fn refine_one_among(
     refine_with(image, start, neighbours, params, &PILOT_GUESSES[..1])
 }
 
-/// The work of [`refine_one`] and [`refine_one_among`]: `guesses` are the pilot pass's blur
-/// guesses where `params.blur` is not given (see [`PILOT_GUESSES`]).
+/// The work of [`refine_one`] and [`refine_one_among`]: `blur_guesses` are the pilot pass's
+/// guesses of the blur where `params.blur` is not given (see [`PILOT_GUESSES`]).
 fn refine_with(
     image: &GrayImage,
     start: [f64; 2],
@@ -995,8 +995,9 @@ fn mirrored(corner: [f64; 2], neighbours: &[[f64; 2]]) -> Vec<[f64; 2]> {
 const AHEAD_COS: f64 = 0.7;
 
 /// Smallest sine of the angle between a ray and the other edge for the walk to stop at its
-/// neighbours' crossing edges (see [`walk_ray`]): 20°, below the sharpest junctions that the
-/// election accepts on strongly foreshortened boards.
+/// neighbours' crossing edges (see [`walk_ray`]): 20°, below the 30° between a corner's edges
+/// that the election's templates and the connectivity need, so that only a direction estimate
+/// gone wrong is refused.
 const MIN_CROSSING_SIN: f64 = 0.34;
 
 /// Samples a walk has before its sigmoid fits start at the predicted crossing
