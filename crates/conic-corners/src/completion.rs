@@ -84,10 +84,10 @@
 //!    over all samples and over the inner ones alone (`|a| + |b| ≤ 0.24`), so a pen or finger
 //!    covering the junction or a quadrant fails; and (c) be refined by [`refine_one_among`]
 //!    (reach one step, else 0.5, 0.3 or 0.15 step: long edge walks fail where scribbles or an
-//!    occluder cut
-//!    the edges) to a corner that is not [`Status::Failed`], or failing that by the gradient
-//!    estimate ([`crate::gradient`]: blurred or foreshortened junctions, as in the outer ring of
-//!    a bent board, leave the edge walks nothing to fit) where the junction model confirms it
+//!    occluder cut the edges) to a corner that is not [`Status::Failed`], or failing that by the
+//!    gradient estimate ([`crate::gradient`]: blurred or foreshortened junctions, as in the
+//!    outer ring of a bent board, leave the edge walks nothing to fit) where the junction model
+//!    confirms it
 //!    (as at a sliver: started there, it stays within 1.5 px with the board's contrast), else by
 //!    the junction model started at the search's position, else by the unconfirmed gradient
 //!    estimate, within `max_offset` steps of `p̂`. A
