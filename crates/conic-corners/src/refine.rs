@@ -147,7 +147,7 @@ pub fn refine_one(image: &GrayImage, start: [f64; 2], params: &RefineParams) -> 
 
 /// [`refine_one`] for a corner of a board whose neighbouring corners are near `neighbours`
 /// (image coordinates, pixel-level positions suffice). In the measuring pass (not the pilot,
-/// see [`Ends::NONE`]) each ray's walk ends before its profile
+/// whose windows follow a guessed blur) each ray's walk ends before its profile
 /// windows reach the crossing edge of a neighbour ahead of it (one within 45° of the ray,
 /// that edge taken parallel to the corner's own crossing edge). Without this a walk runs on
 /// until its samples change polarity beyond the neighbour, and on a board turned by 45° in
