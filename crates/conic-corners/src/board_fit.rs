@@ -1334,6 +1334,9 @@ fn until_stable<F>(
     distance: impl Fn(&F, &[f64; 2]) -> f64,
 ) -> Option<(F, usize, Vec<usize>)> {
     let mut kept: Vec<usize> = range.clone().collect();
+    // Distances of the whole range, once per round: the kept ones give the MAD, all of them the
+    // next kept set.
+    let mut all: Vec<f64> = Vec::with_capacity(range.len());
     let mut dev: Vec<f64> = Vec::with_capacity(range.len());
     let mut last = None;
     for _ in 0..5 {
@@ -1341,14 +1344,16 @@ fn until_stable<F>(
             return None;
         }
         let f = fit(&kept)?;
+        all.clear();
+        all.extend(range.clone().map(|i| distance(&f, &pts[i]).abs()));
         dev.clear();
-        dev.extend(kept.iter().map(|&i| distance(&f, &pts[i]).abs()));
+        dev.extend(kept.iter().map(|&i| all[i - range.start]));
         let mid = dev.len() / 2;
         let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
         let limit = (3.5 * 1.4826 * mad).max(0.05);
         let next: Vec<usize> = range
             .clone()
-            .filter(|&i| distance(&f, &pts[i]).abs() <= limit)
+            .filter(|&i| all[i - range.start] <= limit)
             .collect();
         let stable = next == kept;
         last = Some((f, kept.len()));
