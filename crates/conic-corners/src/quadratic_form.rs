@@ -2371,6 +2371,19 @@ mod tests {
     }
 
     #[test]
+    fn sampson_sums_refuse_gradients_beyond_f32_range() {
+        // A Gauss–Newton step can throw the conic far off; where |∇F|² at a sample leaves the
+        // range of the `f32` reciprocal root, the conic is refused rather than mis-weighted.
+        let pts: Vec<[f64; 2]> = (0..12).map(|i| [i as f64, 0.01 * (i * i) as f64]).collect();
+        let fr = principal_frame(&pts, None).unwrap();
+        let fp = FramePoints::new(&pts, None, &fr, 1.0 / fr.var_t.sqrt(), 1.0);
+        assert!(sampson_normal(&fp, &[0.01, 0.0, 0.0, 0.0, 0.0]).is_some());
+        assert!(sampson_normal(&fp, &[1e20, 0.0, 0.0, 0.0, 0.0]).is_none());
+        // F = u² − v − 1 has F_x = 2u and F_y = −1, so |∇F|² ≥ 1: never singular.
+        assert!(sampson_normal(&fp, &[1.0, 0.0, 0.0, 0.0, -1.0]).is_some());
+    }
+
+    #[test]
     fn edge_curve_bad_input() {
         assert!(fit_edge_curve(&[], None).is_none());
         assert!(fit_edge_curve(&[[0.0, 0.0], [1.0, 1.0]], None).is_none());
