@@ -794,14 +794,13 @@ fn sampson_normal_generic<const FUSED: bool>(
             q[5][l] = r * sw[l];
         }
     }
-    let mut acc = [0.0; 21];
-    gram_sums::<6, FUSED>(&rows, &LEFT_ROWS, &mut acc);
-    gram_sums::<6, FUSED>(&rows, &RIGHT_ROWS, &mut acc);
-    gram_sums::<9, FUSED>(&rows, &CROSS_ROWS, &mut acc);
     if singular.iter().any(|&s| s != 0.0) {
         return None;
     }
-    let sums = acc;
+    let mut sums = [0.0; 21];
+    gram_sums::<6, FUSED>(&rows, &LEFT_ROWS, &mut sums);
+    gram_sums::<6, FUSED>(&rows, &RIGHT_ROWS, &mut sums);
+    gram_sums::<9, FUSED>(&rows, &CROSS_ROWS, &mut sums);
     let mut h = Matrix5::zeros();
     let mut idx = 6;
     for row in 0..5 {
@@ -847,13 +846,13 @@ const CROSS_ROWS: [(usize, usize); 9] = [
     (2, 5),
 ];
 
-/// Sums over all groups of `rows` of the row products `pairs` (each `x ≤ y`), into their slots
-/// of `acc` ([`gram_slot`]).
+/// Sums over all blocks of `rows` of the row products `pairs` (each `x ≤ y`), into their slots
+/// of `sums` ([`gram_slot`]).
 #[inline(always)]
 fn gram_sums<const N: usize, const FUSED: bool>(
     rows: &[[[f64; BLOCK]; 6]],
     pairs: &[(usize, usize); N],
-    acc: &mut [f64; 21],
+    sums: &mut [f64; 21],
 ) {
     let fma = |a: f64, b: f64, c: f64| if FUSED { a.mul_add(b, c) } else { a * b + c };
     let mut s = [[0.0; LANES]; N];
@@ -868,7 +867,7 @@ fn gram_sums<const N: usize, const FUSED: bool>(
         }
     }
     for (sk, &(x, y)) in s.iter().zip(pairs) {
-        acc[gram_slot(x, y)] = sk.iter().sum();
+        sums[gram_slot(x, y)] = sk.iter().sum();
     }
 }
 
