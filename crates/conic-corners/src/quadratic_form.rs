@@ -716,17 +716,20 @@ impl FramePoints {
 /// Weighted sum of squared Sampson distances of the points to the edge-frame conic
 /// `F(u, v) = A u² + B uv + C v² + D u + E − v` (`θ = [A, B, C, D, E]`), with the Gauss–Newton
 /// normal matrix `Σ w J Jᵀ` and gradient `Σ w r J` of the residuals `r = F / |∇F|`. `None` if a
-/// point sits on a singular point of the conic or the sums are not finite.
+/// point sits on a singular point of the conic, the sums are not finite or the cost exceeds
+/// `limit`: a trial step that does not lower the cost needs no normal equations, and half of
+/// Gauss–Newton's trials on the photos' edges are such (their products are most of the work).
 fn sampson_normal(
     pts: &FramePoints,
     theta: &[f64; 5],
+    limit: f64,
 ) -> Option<(f64, Matrix5<f64>, Vector5<f64>)> {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
         // SAFETY: AVX2 and FMA support were just checked at run time.
-        return unsafe { sampson_normal_avx2(pts, theta) };
+        return unsafe { sampson_normal_avx2(pts, theta, limit) };
     }
-    sampson_normal_generic::<false>(pts, theta)
+    sampson_normal_generic::<false>(pts, theta, limit)
 }
 
 /// [`sampson_normal_generic`] compiled for AVX2 + FMA: each group of [`LANES`] points is one
@@ -737,8 +740,9 @@ fn sampson_normal(
 unsafe fn sampson_normal_avx2(
     pts: &FramePoints,
     theta: &[f64; 5],
+    limit: f64,
 ) -> Option<(f64, Matrix5<f64>, Vector5<f64>)> {
-    sampson_normal_generic::<true>(pts, theta)
+    sampson_normal_generic::<true>(pts, theta, limit)
 }
 
 /// [`sampson_normal`], with fused multiply-adds if `FUSED`.
@@ -746,6 +750,7 @@ unsafe fn sampson_normal_avx2(
 fn sampson_normal_generic<const FUSED: bool>(
     pts: &FramePoints,
     theta: &[f64; 5],
+    limit: f64,
 ) -> Option<(f64, Matrix5<f64>, Vector5<f64>)> {
     let fma = |a: f64, b: f64, c: f64| if FUSED { a.mul_add(b, c) } else { a * b + c };
     let [a, b, c, d, e] = *theta;
@@ -756,6 +761,8 @@ fn sampson_normal_generic<const FUSED: bool>(
     // 4.5 ns per point and this one 3.5 ns (512 points, one core).
     let mut rows = pts.rows.borrow_mut();
     let mut singular = [0.0; BLOCK];
+    // The cost in the lanes and order of `gram_sums`, so that it is the same sum to the bit.
+    let mut cost = [0.0; LANES];
     let blocks = pts
         .u
         .chunks_exact(BLOCK)
@@ -793,8 +800,13 @@ fn sampson_normal_generic<const FUSED: bool>(
             q[4][l] = sig;
             q[5][l] = r * sw[l];
         }
+        for g in q[5].chunks_exact(LANES) {
+            for (c, &r) in cost.iter_mut().zip(g) {
+                *c = fma(r, r, *c);
+            }
+        }
     }
-    if singular.iter().any(|&s| s != 0.0) {
+    if singular.iter().any(|&s| s != 0.0) || !(cost.iter().sum::<f64>() <= limit) {
         return None;
     }
     let mut sums = [0.0; 21];
@@ -909,12 +921,10 @@ fn sampson_refine(
         let mut t = 1.0;
         for _ in 0..4 {
             let cand: [f64; 5] = std::array::from_fn(|k| theta[k] + t * step[k]);
-            if let Some((c2, h2, g2)) = sampson_normal(pts, &cand) {
-                if c2 <= cost {
-                    (theta, cost, h, g) = (cand, c2, h2, g2);
-                    accepted = true;
-                    break;
-                }
+            if let Some((c2, h2, g2)) = sampson_normal(pts, &cand, cost) {
+                (theta, cost, h, g) = (cand, c2, h2, g2);
+                accepted = true;
+                break;
             }
             t *= 0.5;
         }
@@ -1141,7 +1151,7 @@ impl EdgeCandidates {
             let start = [circle, parabola]
                 .into_iter()
                 .flatten()
-                .filter_map(|par| Some((par, sampson_normal(&fpts, &par)?)))
+                .filter_map(|par| Some((par, sampson_normal(&fpts, &par, f64::INFINITY)?)))
                 .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
             if let Some((par, start)) = start {
                 let rss_par = start.0;
@@ -2339,7 +2349,7 @@ mod tests {
         let fp = FramePoints::new(&pts, Some(&weights), &fr, inv, 1.0);
         assert_eq!((fp.len, fp.u.len()), (22, 32));
         let theta = [0.3, -0.05, 0.02, 0.1, -0.2];
-        let (c0, h0, g0) = sampson_normal_generic::<false>(&fp, &theta).unwrap();
+        let (c0, h0, g0) = sampson_normal_generic::<false>(&fp, &theta, f64::INFINITY).unwrap();
         // The same sums written out point by point.
         let (mut c1, mut g1, mut h1) = (0.0, Vector5::zeros(), Matrix5::zeros());
         for (u, v, w) in fp.iter() {
@@ -2362,7 +2372,7 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: checked just above.
-            let (c2, h2, g2) = unsafe { sampson_normal_avx2(&fp, &theta) }.unwrap();
+            let (c2, h2, g2) = unsafe { sampson_normal_avx2(&fp, &theta, f64::INFINITY) }.unwrap();
             assert!((c0 - c2).abs() <= 1e-12 * c0);
             assert!((g0 - g2).norm() <= 1e-12 * g0.norm());
             assert!((h0 - h2).norm() <= 1e-12 * h0.norm());
@@ -2376,10 +2386,28 @@ mod tests {
         let pts: Vec<[f64; 2]> = (0..12).map(|i| [i as f64, 0.01 * (i * i) as f64]).collect();
         let fr = principal_frame(&pts, None).unwrap();
         let fp = FramePoints::new(&pts, None, &fr, 1.0 / fr.var_t.sqrt(), 1.0);
-        assert!(sampson_normal(&fp, &[0.01, 0.0, 0.0, 0.0, 0.0]).is_some());
-        assert!(sampson_normal(&fp, &[1e20, 0.0, 0.0, 0.0, 0.0]).is_none());
+        let any = f64::INFINITY;
+        assert!(sampson_normal(&fp, &[0.01, 0.0, 0.0, 0.0, 0.0], any).is_some());
+        assert!(sampson_normal(&fp, &[1e20, 0.0, 0.0, 0.0, 0.0], any).is_none());
         // F = u² − v − 1 has F_x = 2u and F_y = −1, so |∇F|² ≥ 1: never singular.
-        assert!(sampson_normal(&fp, &[1.0, 0.0, 0.0, 0.0, -1.0]).is_some());
+        assert!(sampson_normal(&fp, &[1.0, 0.0, 0.0, 0.0, -1.0], any).is_some());
+    }
+
+    #[test]
+    fn sampson_sums_stop_at_the_cost_limit() {
+        // A trial whose cost exceeds the limit gets no normal equations; one at or below it gets
+        // the same sums as without a limit, to the bit.
+        let pts: Vec<[f64; 2]> = (0..40)
+            .map(|i| [i as f64, 0.02 * (i * i) as f64 + 0.05 * ((i * 5) % 7) as f64])
+            .collect();
+        let fr = principal_frame(&pts, None).unwrap();
+        let fp = FramePoints::new(&pts, None, &fr, 1.0 / fr.var_t.sqrt(), 1.0);
+        let theta = [0.2, 0.01, 0.0, 0.05, -0.1];
+        let full = sampson_normal(&fp, &theta, f64::INFINITY).unwrap();
+        assert!(full.0 > 0.0);
+        assert_eq!(sampson_normal(&fp, &theta, full.0), Some(full));
+        assert!(sampson_normal(&fp, &theta, 0.999 * full.0).is_none());
+        assert!(sampson_normal(&fp, &theta, f64::NAN).is_none());
     }
 
     #[test]
