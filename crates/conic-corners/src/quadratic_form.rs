@@ -1716,23 +1716,25 @@ impl PositionStats {
         params: f64,
         origin: Option<[f64; 2]>,
     ) -> Option<Self> {
-        let (mut n, mut mx, mut my) = (0.0, 0.0, 0.0);
+        // One pass for the centroid and the scatter, about the first point: image coordinates
+        // span a few hundred pixels, so the shifted sums lose nothing to cancellation.
+        let [x0, y0] = *points.clone().next()?;
+        let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for p in points.clone() {
+            let (dx, dy) = (p[0] - x0, p[1] - y0);
             n += 1.0;
-            mx += p[0];
-            my += p[1];
-        }
-        if n <= params {
-            return None;
-        }
-        let (mx, my) = (mx / n, my / n);
-        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-        for p in points.clone() {
-            let (dx, dy) = (p[0] - mx, p[1] - my);
+            sx += dx;
+            sy += dy;
             sxx += dx * dx;
             sxy += dx * dy;
             syy += dy * dy;
         }
+        if n <= params {
+            return None;
+        }
+        let (mx, my) = (sx / n, sy / n);
+        let (sxx, sxy, syy) = (sxx - n * mx * mx, sxy - n * mx * my, syy - n * my * my);
+        let (mx, my) = (x0 + mx, y0 + my);
         let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
         let t = [theta.cos(), theta.sin()];
         let scale = ((sxx * t[0] * t[0] + 2.0 * sxy * t[0] * t[1] + syy * t[1] * t[1]) / n).sqrt();
@@ -1740,11 +1742,33 @@ impl PositionStats {
             return None;
         }
         let [ox, oy] = origin.unwrap_or([mx, my]);
+        let u_of = |p: &[f64; 2]| ((p[0] - ox) * t[0] + (p[1] - oy) * t[1]) / scale;
         let mut gram = Matrix5::zeros();
-        for p in points {
-            let u = ((p[0] - ox) * t[0] + (p[1] - oy) * t[1]) / scale;
-            let phi = basis.at(u);
-            gram += phi * phi.transpose();
+        match basis {
+            // The Gram matrix of `1, u, …, u^d` is the Hankel matrix of the power sums Σ uᵏ,
+            // k ≤ 2d: nine sums per point instead of the 25 products of `φ φᵀ`.
+            Basis::Poly(_) => {
+                let m = basis.len();
+                let mut sums = [0.0; 9];
+                for p in points {
+                    let (u, mut v) = (u_of(p), 1.0);
+                    for s in &mut sums[..2 * m - 1] {
+                        *s += v;
+                        v *= u;
+                    }
+                }
+                for i in 0..m {
+                    for j in 0..m {
+                        gram[(i, j)] = sums[i + j];
+                    }
+                }
+            }
+            Basis::Inflected => {
+                for p in points {
+                    let phi = basis.at(u_of(p));
+                    gram += phi * phi.transpose();
+                }
+            }
         }
         for k in basis.len()..5 {
             gram[(k, k)] = 1.0;
@@ -1944,6 +1968,40 @@ mod tests {
         let few = PositionStats::new(pts[..5].iter(), &line, EdgeModel::Line).unwrap();
         let p = [2.0, 2.6];
         assert!(few.variance_bound_at(p) / few.variance_at(p) > 5.0);
+    }
+
+    #[test]
+    fn position_stats_gram_is_the_sum_of_the_basis_products() {
+        // The Hankel matrix of power sums is ΦᵀΦ written out point by point, for every degree,
+        // on samples far from the origin (the centroid is taken about the first point).
+        let pts: Vec<[f64; 2]> = (0..40)
+            .map(|i| {
+                let t = i as f64;
+                [
+                    1500.0 + 3.0 * t,
+                    900.0 + 1.2 * t + 0.002 * t * t + 0.1 * ((i * 3) % 5) as f64,
+                ]
+            })
+            .collect();
+        for degree in 1..=4 {
+            let st = PositionStats::design(pts.iter(), Basis::Poly(degree), 1.0, None).unwrap();
+            let mut gram = Matrix5::zeros();
+            for p in &pts {
+                let u = ((p[0] - st.centre[0]) * st.tangent[0]
+                    + (p[1] - st.centre[1]) * st.tangent[1])
+                    / st.scale;
+                let phi = Basis::Poly(degree).at(u);
+                gram += phi * phi.transpose();
+            }
+            for k in degree + 1..5 {
+                gram[(k, k)] = 1.0;
+            }
+            let product = gram * st.inverse;
+            assert!(
+                (product - Matrix5::identity()).norm() < 1e-9,
+                "degree {degree}"
+            );
+        }
     }
 
     fn close(p: [f64; 2], q: [f64; 2], tol: f64) -> bool {
@@ -2398,7 +2456,12 @@ mod tests {
         // A trial whose cost exceeds the limit gets no normal equations; one at or below it gets
         // the same sums as without a limit, to the bit.
         let pts: Vec<[f64; 2]> = (0..40)
-            .map(|i| [i as f64, 0.02 * (i * i) as f64 + 0.05 * ((i * 5) % 7) as f64])
+            .map(|i| {
+                [
+                    i as f64,
+                    0.02 * (i * i) as f64 + 0.05 * ((i * 5) % 7) as f64,
+                ]
+            })
             .collect();
         let fr = principal_frame(&pts, None).unwrap();
         let fp = FramePoints::new(&pts, None, &fr, 1.0 / fr.var_t.sqrt(), 1.0);
