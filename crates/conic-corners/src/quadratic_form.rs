@@ -1147,12 +1147,17 @@ impl EdgeCandidates {
                 Vector3::new(mv[0], mv[1], mv[3]),
             )
             .map(|sol| [sol[2], 0.0, 0.0, sol[1], sol[0]]);
-            // The better of the two by geometric cost, with the conic's first normal equations.
-            let start = [circle, parabola]
-                .into_iter()
-                .flatten()
-                .filter_map(|par| Some((par, sampson_normal(&fpts, &par, f64::INFINITY)?)))
-                .min_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
+            // The better of the two by geometric cost (the circle on a tie), with the conic's
+            // first normal equations: the second is summed in full only if it costs less.
+            let mut start: Option<([f64; 5], (f64, Matrix5<f64>, Vector5<f64>))> = None;
+            for par in [circle, parabola].into_iter().flatten() {
+                let limit = start.as_ref().map_or(f64::INFINITY, |(_, s)| s.0);
+                if let Some(s) = sampson_normal(&fpts, &par, limit) {
+                    if start.is_none() || s.0 < limit {
+                        start = Some((par, s));
+                    }
+                }
+            }
             if let Some((par, start)) = start {
                 let rss_par = start.0;
                 let b = bic(rss_par, 3.0);
