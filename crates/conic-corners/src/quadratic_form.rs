@@ -914,7 +914,7 @@ fn sampson_refine(
         if cost - 4.0 * predicted > useful {
             return None;
         }
-        if !(predicted > 1e-4 * cost + 1e-20 * n) {
+        if !(predicted > 1e-3 * cost + 1e-20 * n) {
             break;
         }
         let mut accepted = false;
