@@ -469,9 +469,9 @@ fn fit_junction(
             let next = p + step;
             // The decrease the normal equations' linear model predicts, 2 sᵀJᵀr − sᵀJᵀJ s, by
             // (JᵀJ + λD) s = Jᵀr. A step that would end the fit by the test below (a move below
-            // 10⁻³ px and a relative decrease below 10⁻⁴) is taken without evaluating it: it
-            // was a sixth of the model's evaluations on the photos, and where it lands differs
-            // from the last evaluated point by less than the fit's own tolerance.
+            // 10⁻³ px and a relative decrease below 10⁻⁴) is taken without evaluating it: that
+            // saves the last of the 5–8 evaluations a converged fit takes on the photos, and
+            // where it lands differs from the last evaluated point by less than the tolerance.
             let damping: f64 = (0..NP)
                 .map(|i| lambda * jtj[(i, i)].max(1e-12) * step[i] * step[i])
                 .sum();

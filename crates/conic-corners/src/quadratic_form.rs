@@ -1734,8 +1734,8 @@ impl PositionStats {
         params: f64,
         origin: Option<[f64; 2]>,
     ) -> Option<Self> {
-        // One pass for the centroid and the scatter, about the first point: image coordinates
-        // span a few hundred pixels, so the shifted sums lose nothing to cancellation.
+        // One pass for the centroid and the scatter, about the first point: one fit's points
+        // span at most a few hundred pixels, so the shifted sums lose nothing to cancellation.
         let [x0, y0] = *points.clone().next()?;
         let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for p in points.clone() {
