@@ -472,11 +472,13 @@ fn fit_junction(
             // 10⁻³ px and a relative decrease below 10⁻⁴) is taken without evaluating it: that
             // saves the last of the 5–8 evaluations a converged fit takes on the photos, and
             // where it lands differs from the last evaluated point by less than the tolerance.
-            let damping: f64 = (0..NP)
-                .map(|i| lambda * jtj[(i, i)].max(1e-12) * step[i] * step[i])
-                .sum();
-            let predicted = step.dot(&jtr) + damping;
-            if step[0].hypot(step[1]) < 1e-3 && predicted < 1e-4 * cost {
+            let predicted = || {
+                let damping: f64 = (0..NP)
+                    .map(|i| lambda * jtj[(i, i)].max(1e-12) * step[i] * step[i])
+                    .sum();
+                step.dot(&jtr) + damping
+            };
+            if step[0].hypot(step[1]) < 1e-3 && predicted() < 1e-4 * cost {
                 p = next;
                 improved = true;
                 converged = true;

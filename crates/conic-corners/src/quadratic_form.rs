@@ -761,7 +761,7 @@ fn sampson_normal_generic<const FUSED: bool>(
     // 4.5 ns per point and this one 3.5 ns (512 points, one core).
     let mut rows = pts.rows.borrow_mut();
     let mut singular = [0.0; BLOCK];
-    // The cost in the lanes and order of `gram_sums`, so that it is the same sum to the bit.
+    // The cost, summed in lanes like the products of `gram_sums`.
     let mut cost = [0.0; LANES];
     let blocks = pts
         .u
@@ -806,12 +806,14 @@ fn sampson_normal_generic<const FUSED: bool>(
             }
         }
     }
-    if singular.iter().any(|&s| s != 0.0) || !(cost.iter().sum::<f64>() <= limit) {
+    let cost: f64 = cost.iter().sum();
+    if singular.iter().any(|&s| s != 0.0) || !(cost <= limit) {
         return None;
     }
     let mut sums = [0.0; 21];
+    sums[gram_slot(5, 5)] = cost;
     gram_sums::<6, FUSED>(&rows, &LEFT_ROWS, &mut sums);
-    gram_sums::<6, FUSED>(&rows, &RIGHT_ROWS, &mut sums);
+    gram_sums::<5, FUSED>(&rows, &RIGHT_ROWS, &mut sums);
     gram_sums::<9, FUSED>(&rows, &CROSS_ROWS, &mut sums);
     let mut h = Matrix5::zeros();
     let mut idx = 6;
@@ -843,8 +845,9 @@ const fn gram_slot(x: usize, y: usize) -> usize {
 
 /// The products of [`sampson_normal`]'s rows 0–2 among themselves.
 const LEFT_ROWS: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-/// The products of rows 3–5 among themselves.
-const RIGHT_ROWS: [(usize, usize); 6] = [(3, 3), (3, 4), (4, 4), (3, 5), (4, 5), (5, 5)];
+/// The products of rows 3–5 among themselves, but for row 5's with itself: the cost, which the
+/// first pass sums.
+const RIGHT_ROWS: [(usize, usize); 5] = [(3, 3), (3, 4), (4, 4), (3, 5), (4, 5)];
 /// The products of rows 0–2 with rows 3–5.
 const CROSS_ROWS: [(usize, usize); 9] = [
     (0, 3),
@@ -1165,10 +1168,9 @@ impl EdgeCandidates {
             let mut start: Option<([f64; 5], SampsonSums)> = None;
             for par in [circle, parabola].into_iter().flatten() {
                 let limit = start.as_ref().map_or(f64::INFINITY, |(_, s)| s.0);
-                if let Some(s) = sampson_normal(&fpts, &par, limit) {
-                    if start.is_none() || s.0 < limit {
-                        start = Some((par, s));
-                    }
+                // A returned cost is finite: below an infinite limit, the first always wins.
+                if let Some(s) = sampson_normal(&fpts, &par, limit).filter(|s| s.0 < limit) {
+                    start = Some((par, s));
                 }
             }
             if let Some((par, start)) = start {
