@@ -185,8 +185,10 @@ pub struct FittedCorner {
     /// `√` of the larger eigenvalue of `cov`: the standard deviation (px) in the worst direction.
     pub sigma: f64,
     /// Where the row and column curves meet and the covariance (px²) there, when that was
-    /// rejected for lying too far from the local answer ([`Fallback::TooFar`]): if the local
-    /// answer is itself doubtful (the refiner failed there), the junction is likelier here.
+    /// rejected for lying too far from the local answer ([`Fallback::TooFar`]): the local answer
+    /// may be the one that is off (a pixel-level corner a few pixels from its junction), and
+    /// [`crate::detect`] takes this point where it is as sure as most of the board's answers or
+    /// where the refiner fails at the local answer.
     pub too_far: Option<([f64; 2], [[f64; 2]; 2])>,
 }
 

@@ -186,7 +186,9 @@ pub struct DetectedCorner {
     /// model and the gradient estimate, for a board-wide answer whose σ is above its board's
     /// limit ([`DetectParams::max_board_sigma`]) kept for want of a better one, and for a
     /// board-wide answer taken although it lies farther than the board fit's
-    /// `max_shift` from the pixel-level position (only where no refiner could place the corner);
+    /// `max_shift` from the pixel-level position where no refiner could place the corner (one
+    /// that far but as sure as the board answers that need no junction fit, within the local
+    /// refiner's `max_shift` and nearer to its own corner than to any other, is `Converged`);
     /// `Failed` keeps the pixel-level position (only with [`DetectParams::keep_unrefined`]).
     pub status: Status,
     /// RMS distance (px) of the edge samples to their curves; `None` when not refined.
@@ -336,6 +338,8 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             }
         });
         let sigma_limit = params.max_board_sigma * typical_sigma;
+        // As sure as the board answers that need no junction fit.
+        let sure_sigma = params.junction_gate.min(params.max_board_sigma) * typical_sigma;
         board_fit_ms += ms(t);
         let t = Instant::now();
         let refined: Vec<DetectedCorner> = b
@@ -345,15 +349,37 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             .enumerate()
             .map(|(k, (&i, &(row, col)))| {
                 let pixel = pixel_corner(&corners[i], row, col);
+                // The curves' intersection, also where it lies farther than the board fit's
+                // `max_shift` from the pixel-level corner if it is sure enough to need no junction
+                // fit: on large squares the election's pixel can be 2–5 px off the junction (a
+                // print's dot gain, a dot near it), while the curves, sampled on both sides of
+                // the corner, agree with the local refiner's answer to 0.02–0.3 px there.
                 let board = fitted.as_ref().and_then(|f| {
                     let f = &f[k];
-                    (f.path == Path::Board).then_some(DetectedCorner {
-                        x: f.x,
-                        y: f.y,
+                    let (point, cov) = match f.too_far {
+                        _ if f.path == Path::Board => ([f.x, f.y], f.cov),
+                        Some((p, cov))
+                            if sure_far(
+                                &corners,
+                                b,
+                                i,
+                                p,
+                                cov,
+                                sure_sigma,
+                                params.refine.max_shift,
+                            ) =>
+                        {
+                            (p, cov)
+                        }
+                        _ => return None,
+                    };
+                    Some(DetectedCorner {
+                        x: point[0],
+                        y: point[1],
                         status: Status::Converged,
                         path: Path::Board,
-                        sigma: Some(f.sigma),
-                        cov: Some(f.cov),
+                        sigma: Some(worst_sigma(cov)),
+                        cov: Some(cov),
                         ..pixel
                     })
                 });
@@ -672,6 +698,24 @@ fn nearest_is_own(corners: &[Corner], board: &LabelledBoard, i: usize, q: [f64; 
     let d = |j: usize| (corners[j].x - q[0]).hypot(corners[j].y - q[1]);
     let own = d(i);
     board.corners.iter().all(|&j| j == i || d(j) > own)
+}
+
+/// Whether the board fit's intersection `p` (covariance `cov`), refused for lying farther than
+/// its `max_shift` from the pixel-level corner `i` of `board`, is sure enough to be taken: σ at
+/// most `max_sigma`, within `reach` px of the corner and nearer to it than to any other corner of
+/// the board (not another junction's).
+fn sure_far(
+    corners: &[Corner],
+    board: &LabelledBoard,
+    i: usize,
+    p: [f64; 2],
+    cov: Cov,
+    max_sigma: f64,
+    reach: f64,
+) -> bool {
+    worst_sigma(cov) <= max_sigma
+        && (p[0] - corners[i].x).hypot(p[1] - corners[i].y) <= reach
+        && nearest_is_own(corners, board, i, p)
 }
 
 /// `c` placed by the gradient estimate started from its position, if that converges.
@@ -1046,6 +1090,34 @@ mod tests {
             Some([20.0, 21.0])
         );
         assert_eq!(neighbour_prediction(&corners, &row_only, (1, 0)), None);
+    }
+
+    #[test]
+    fn a_far_intersection_is_taken_only_when_sure_near_and_its_own() {
+        let corner = |x: f64, y: f64| Corner {
+            x,
+            y,
+            angles: [0.0, std::f64::consts::FRAC_PI_2],
+            score: 1.0,
+        };
+        // Two neighbours 10 px apart on a row.
+        let corners = vec![corner(10.0, 10.0), corner(20.0, 10.0)];
+        let board = LabelledBoard {
+            corners: vec![0, 1],
+            labels: vec![(0, 0), (0, 1)],
+            rows: 1,
+            cols: 2,
+        };
+        let cov = |s: f64| [[s * s, 0.0], [0.0, 0.25 * s * s]];
+        let sure = |p: [f64; 2], s: f64| sure_far(&corners, &board, 0, p, cov(s), 0.05, 5.0);
+        // 3 px off the pixel-level corner, σ 0.04 px: taken.
+        assert!(sure([13.0, 10.0], 0.04));
+        // Less sure than the limit (the worst direction counts).
+        assert!(!sure([13.0, 10.0], 0.06));
+        // Beyond the local refiner's reach.
+        assert!(!sure([10.0, 15.5], 0.04));
+        // Nearer to the neighbour than to its own pixel-level corner: another junction.
+        assert!(!sure([15.5, 10.0], 0.04));
     }
 
     #[test]

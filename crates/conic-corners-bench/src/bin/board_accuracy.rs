@@ -9,7 +9,8 @@
 //! pixel, as a camera does ([`conic_corners::synth::BoardScene::render`]). Saves each view as the 8-bit PNG every method
 //! reads, and runs conic-corners on exactly those pixels, once per [`RefineMode`].
 //!
-//! **Rig.** Both cameras are 1920×1200 pinholes with their own intrinsics and two-term radial
+//! **Rig.** Both cameras are 1920×1200 pinholes (`--resolution-scale K`: `K` times the
+//! resolution and focal lengths) with their own intrinsics and two-term radial
 //! distortion (`x_d = x_n (1 + k₁r² + k₂r⁴)`, OpenCV's model with `p₁ = p₂ = k₃ = 0`). In the rig
 //! frame (x right, y down, z forward, mm) the left camera sits at `(−50, 0, 0)`, the right one at
 //! `(50, 0, 0)`, both toed in to look at `(0, 0, 500)` (±5.7°). A board's pose is drawn in the rig
@@ -72,6 +73,11 @@ struct Args {
     /// or a phone's compression, which moves edges block by block.
     #[arg(long)]
     jpeg_quality: Option<u8>,
+    /// Factor (1–8) on both cameras' resolution and focal lengths: the same scenes and poses
+    /// with every square this many times larger in pixels, the blur (drawn in px) unchanged; a
+    /// sharper, higher-resolution camera, where a grid line holds proportionally more samples.
+    #[arg(long, default_value_t = 1.0)]
+    resolution_scale: f64,
 }
 
 /// `image` compressed as a JPEG of `quality` and decoded again.
@@ -102,10 +108,11 @@ const SUPERSAMPLE: usize = 32;
 const POSE_TRIES: usize = 100;
 const MIN_VISIBLE: f64 = 0.85;
 
-/// The two cameras of the rig: intrinsics differ slightly, as in a real pair.
-fn cameras() -> [PinholeCamera; 2] {
+/// The two cameras of the rig: intrinsics differ slightly, as in a real pair. `scale` multiplies
+/// the resolution and focal lengths (the principal point keeps its place in the image).
+fn cameras(scale: f64) -> [PinholeCamera; 2] {
     let base = PinholeCamera::default();
-    [
+    let cams = [
         PinholeCamera {
             fx: 1602.0,
             fy: 1600.5,
@@ -124,7 +131,21 @@ fn cameras() -> [PinholeCamera; 2] {
             k2: 0.02,
             ..base
         },
-    ]
+    ];
+    if scale == 1.0 {
+        return cams;
+    }
+    // Pixel centres at integers: the image's edge −0.5 stays put.
+    let at = |c: f64| (c + 0.5) * scale - 0.5;
+    cams.map(|c| PinholeCamera {
+        width: (c.width as f64 * scale).round() as usize,
+        height: (c.height as f64 * scale).round() as usize,
+        fx: c.fx * scale,
+        fy: c.fy * scale,
+        cx: at(c.cx),
+        cy: at(c.cy),
+        ..c
+    })
 }
 
 /// Rig frame → camera frame of a camera at `(x, 0, 0)` looking at `(0, 0, CONVERGENCE)`.
@@ -230,9 +251,9 @@ struct Rig {
 }
 
 impl Rig {
-    fn new() -> Self {
+    fn new(scale: f64) -> Self {
         Self {
-            cams: cameras(),
+            cams: cameras(scale),
             poses: [
                 camera_from_rig(-HALF_BASELINE),
                 camera_from_rig(HALF_BASELINE),
@@ -311,9 +332,9 @@ fn draw_board(
 type PairScenes = (BoardScene, Isometry3<f64>, [(BoardScene, u64); 2]);
 
 /// Draws pair `i` of the run seeded with `seed`: everything but the pixels.
-fn draw_pair(seed: u64, occluded_share: f64, i: usize) -> Result<PairScenes, String> {
+fn draw_pair(seed: u64, occluded_share: f64, scale: f64, i: usize) -> Result<PairScenes, String> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(i as u64));
-    let rig = Rig::new();
+    let rig = Rig::new(scale);
     let (template, pose) = draw_board(i, &mut rng, &rig)?;
     let mut view = |v: usize| -> Result<(BoardScene, u64), String> {
         let mut scene = BoardScene {
@@ -334,8 +355,9 @@ fn draw_pair(seed: u64, occluded_share: f64, i: usize) -> Result<PairScenes, Str
 
 /// One rendered, detected pair: its truth line and its `ours.jsonl` lines.
 fn run_pair(args: &Args, i: usize) -> Result<(Value, Vec<Value>), String> {
-    let rig = Rig::new();
-    let (template, pose, scenes) = draw_pair(args.seed, args.occluded_share, i)?;
+    let rig = Rig::new(args.resolution_scale);
+    let (template, pose, scenes) =
+        draw_pair(args.seed, args.occluded_share, args.resolution_scale, i)?;
     let mut views = serde_json::Map::new();
     let mut ours = Vec::new();
     for ((mut scene, noise_seed), side) in scenes.into_iter().zip(["L", "R"]) {
@@ -442,6 +464,9 @@ fn validate(args: &Args) -> Result<(), String> {
     if args.jpeg_quality.is_some_and(|q| !(1..=100).contains(&q)) {
         return Err("--jpeg-quality must be in 1..=100".into());
     }
+    if !(1.0..=8.0).contains(&args.resolution_scale) {
+        return Err("--resolution-scale must be in 1..=8".into());
+    }
     Ok(())
 }
 
@@ -516,9 +541,28 @@ mod tests {
             ("--noise-scale", "NaN"),
             ("--jpeg-quality", "0"),
             ("--jpeg-quality", "101"),
+            ("--resolution-scale", "0.5"),
+            ("--resolution-scale", "9"),
+            ("--resolution-scale", "NaN"),
         ] {
             let err = validate(&args(&[&format!("{flag}={value}")])).unwrap_err();
             assert!(err.starts_with(flag), "{flag} {value}: {err}");
+        }
+    }
+
+    #[test]
+    fn a_resolution_scale_magnifies_the_image_about_its_corner() {
+        let p = Point3::new(40.0, -25.0, 480.0);
+        for (one, two) in cameras(1.0).iter().zip(&cameras(2.0)) {
+            assert_eq!((two.width, two.height), (2 * one.width, 2 * one.height));
+            // Pixel centres at integers: x ↦ 2 (x + 0.5) − 0.5.
+            let (a, b) = (project(one, p), project(two, p));
+            for k in 0..2 {
+                assert!(
+                    (b[k] - (2.0 * (a[k] + 0.5) - 0.5)).abs() < 1e-9,
+                    "{a:?} {b:?}"
+                );
+            }
         }
     }
 
@@ -536,7 +580,7 @@ mod tests {
         }
         // The right camera sits 100 mm along the rig's x axis, which the left camera sees turned
         // by its toe-in angle.
-        let rig = Rig::new();
+        let rig = Rig::new(1.0);
         let baseline = (rig.stereo().inverse() * Point3::origin()).coords;
         let want = rig.poses[0].rotation * Vector3::new(2.0 * HALF_BASELINE, 0.0, 0.0);
         assert!((baseline - want).norm() < 1e-9, "{baseline} {want}");
@@ -556,7 +600,7 @@ mod tests {
     #[test]
     fn silhouette_boards_hold_at_every_stride() {
         for i in [16, 23] {
-            let (_, _, views) = draw_pair(2026, 0.0, i).unwrap();
+            let (_, _, views) = draw_pair(2026, 0.0, 1.0, i).unwrap();
             let (scene, noise_seed) = &views[1];
             let rendered = scene.render(*noise_seed).unwrap();
             // The 8-bit pixels the benchmark saves and reads back.
@@ -596,7 +640,7 @@ mod tests {
     /// the left view's corners, and through the stereo transform onto the right view's.
     #[test]
     fn pair_truth_is_one_board_seen_through_the_rig() {
-        let rig = Rig::new();
+        let rig = Rig::new(1.0);
         let stereo = rig.stereo();
         let mut enough = 0;
         for i in 0..10 {
@@ -633,7 +677,7 @@ mod tests {
 
     #[test]
     fn occluders_cross_the_board_and_need_two_visible_corners() {
-        let rig = Rig::new();
+        let rig = Rig::new(1.0);
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let (template, pose) = draw_board(0, &mut rng, &rig).unwrap();
         let corners = rig.view(&template, &pose, 0).corners().unwrap();
