@@ -1325,21 +1325,55 @@ fn robust_fit(
 }
 
 /// The outlier rejection of [`robust_fit`]: `fit` to the samples `range` of `pts`, the samples
-/// farther than `max(3.5 · 1.4826 · MAD, 0.05 px)` from it by `distance` dropped and the fit
-/// repeated (rejected samples may come back) until the kept set stops changing, at most five
-/// times. Returns the last fit, the number of samples it was made from and the kept set after
-/// it; `None` when a fit fails or fewer than 3 samples are left to fit.
+/// farther than `max(3.5 · 1.4826 · MAD, 0.05 px)` from it by `distance` (signed) dropped and the
+/// fit repeated (rejected samples may come back) until the kept set stops changing, at most five
+/// times. Returns the last fit, the number of samples it was made from and the kept set after it;
+/// `None` when a fit fails or fewer than 3 samples are left to fit.
+///
+/// A window of more than [`MAX_FIT_SAMPLES`] samples is first fitted so to every
+/// [`fit_step`]-th of them; then, about that fit, the residuals of all the samples give the step
+/// at which little information is lost ([`thinning`]), and if that is another step the rejection
+/// goes on with every such sample.
 fn until_stable<F>(
     pts: &[[f64; 2]],
     range: Range<usize>,
     mut fit: impl FnMut(&[usize]) -> Option<F>,
     distance: impl Fn(&F, &[f64; 2]) -> f64,
 ) -> Option<(F, usize, Vec<usize>)> {
-    let mut kept: Vec<usize> = range.clone().collect();
-    // Distances of the whole range, once per round: the kept ones give the MAD, all of them the
+    let first_step = fit_step(range.len());
+    let used: Vec<usize> = range.clone().step_by(first_step).collect();
+    let (f, fitted, kept, limit) = reject(pts, &used, used.clone(), &mut fit, &distance)?;
+    if first_step == 1 {
+        return Some((f, fitted, kept));
+    }
+    let step = thinning(range.clone().map(|i| distance(&f, &pts[i])), limit, first_step);
+    if step == first_step {
+        return Some((f, fitted, kept));
+    }
+    let used: Vec<usize> = range.clone().step_by(step).collect();
+    let kept = used
+        .iter()
+        .copied()
+        .filter(|&i| distance(&f, &pts[i]).abs() <= limit)
+        .collect();
+    let (f, fitted, kept, _) = reject(pts, &used, kept, &mut fit, &distance)?;
+    Some((f, fitted, kept))
+}
+
+/// The rounds of [`until_stable`] over the samples `used` (indices into `pts`, in chain order),
+/// from the kept set `kept` (a subset of `used`): also returns the last round's limit.
+fn reject<F>(
+    pts: &[[f64; 2]],
+    used: &[usize],
+    mut kept: Vec<usize>,
+    fit: &mut impl FnMut(&[usize]) -> Option<F>,
+    distance: &impl Fn(&F, &[f64; 2]) -> f64,
+) -> Option<(F, usize, Vec<usize>, f64)> {
+    // Distances of the used samples, once per round: the kept ones give the MAD, all of them the
     // next kept set.
-    let mut all: Vec<f64> = Vec::with_capacity(range.len());
-    let mut dev: Vec<f64> = Vec::with_capacity(range.len());
+    let mut all: Vec<f64> = Vec::with_capacity(used.len());
+    let mut dev: Vec<f64> = Vec::with_capacity(used.len());
+    let mut next: Vec<usize> = Vec::with_capacity(used.len());
     let mut last = None;
     for _ in 0..5 {
         if kept.len() < 3 {
@@ -1347,25 +1381,84 @@ fn until_stable<F>(
         }
         let f = fit(&kept)?;
         all.clear();
-        all.extend(range.clone().map(|i| distance(&f, &pts[i]).abs()));
+        all.extend(used.iter().map(|&i| distance(&f, &pts[i]).abs()));
+        // `kept` is a sorted subset of `used`: its distances are found in one merge.
         dev.clear();
-        dev.extend(kept.iter().map(|&i| all[i - range.start]));
+        let mut j = 0;
+        for &i in &kept {
+            while used[j] != i {
+                j += 1;
+            }
+            dev.push(all[j]);
+        }
         let mid = dev.len() / 2;
         let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
         let limit = (3.5 * 1.4826 * mad).max(0.05);
-        let next: Vec<usize> = range
-            .clone()
-            .filter(|&i| all[i - range.start] <= limit)
-            .collect();
+        next.clear();
+        next.extend(
+            used.iter()
+                .zip(&all)
+                .filter(|&(_, &d)| d <= limit)
+                .map(|(&i, _)| i),
+        );
         let stable = next == kept;
-        last = Some((f, kept.len()));
+        last = Some((f, kept.len(), limit));
         if stable {
             break;
         }
-        kept = next;
+        std::mem::swap(&mut kept, &mut next);
     }
-    let (f, fitted) = last?;
-    Some((f, fitted, kept))
+    let (f, fitted, limit) = last?;
+    Some((f, fitted, kept, limit))
+}
+
+/// Samples a window must exceed before its first fit uses a subset ([`until_stable`]).
+const MAX_FIT_SAMPLES: usize = 192;
+
+/// Share of the residuals' information that [`thinning`] keeps at least.
+const THINNING_INFORMATION: f64 = 0.9;
+
+/// Every how many samples of a window of `n` the first fit of [`until_stable`] uses: 1 up to
+/// [`MAX_FIT_SAMPLES`], then the smallest step that keeps at most that many.
+fn fit_step(n: usize) -> usize {
+    n.div_ceil(MAX_FIT_SAMPLES).max(1)
+}
+
+/// The largest step, at most `max_step`, at which every `k`-th sample keeps
+/// [`THINNING_INFORMATION`] of what all of them say about a fitted curve, from the signed
+/// `residuals` of all the samples in chain order (those beyond `limit`, outliers, left out).
+///
+/// With lag-one correlation ρ (an AR(1) model, as [`PositionStats`] assumes) `n` samples count as
+/// `n (1 − ρ)/(1 + ρ)` independent ones, and every `k`-th as `(n/k)(1 − ρᵏ)/(1 + ρᵏ)`: the share
+/// kept is `(1 − ρᵏ)(1 + ρ) / (k (1 − ρ)(1 + ρᵏ))`. White noise (ρ ≈ 0, the renders) keeps every
+/// sample; residuals that follow the print's texture or a JPEG's blocks (ρ ≈ 0.5–0.9 on the
+/// photos) lose little to a step of 3–8, while the fits' cost falls with it.
+fn thinning(residuals: impl Iterator<Item = f64>, limit: f64, max_step: usize) -> usize {
+    let (mut rss, mut lag, mut prev) = (0.0, 0.0, None);
+    for r in residuals {
+        if r.abs() > limit {
+            prev = None;
+            continue;
+        }
+        rss += r * r;
+        if let Some(q) = prev {
+            lag += r * q;
+        }
+        prev = Some(r);
+    }
+    // As in [`PositionStats`]: beyond 0.9 the AR(1) model is no guide.
+    let rho = if rss > 0.0 {
+        (lag / rss).clamp(0.0, 0.9)
+    } else {
+        0.0
+    };
+    (2..=max_step)
+        .rev()
+        .find(|&k| {
+            let rk = rho.powi(k as i32);
+            (1.0 - rk) * (1.0 + rho) / (k as f64 * (1.0 - rho) * (1.0 + rk)) >= THINNING_INFORMATION
+        })
+        .unwrap_or(1)
 }
 
 /// [`robust_fit`] with the curve of [`PositionStats::inflected`] for the samples `range` of
@@ -1864,6 +1957,79 @@ mod tests {
             })
             .collect();
         rms(errs.into_iter())
+    }
+
+    #[test]
+    fn thinning_keeps_every_sample_of_white_noise_and_thins_correlated_residuals() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let noise = Normal::new(0.0, 0.02).unwrap();
+        let ar1 = |rho: f64, rng: &mut ChaCha8Rng| -> Vec<f64> {
+            let mut r = 0.0;
+            (0..2000)
+                .map(|_| {
+                    r = rho * r + (1.0 - rho * rho).sqrt() * noise.sample(rng);
+                    r
+                })
+                .collect()
+        };
+        assert_eq!(thinning(ar1(0.0, &mut rng).into_iter(), 1.0, 8), 1);
+        assert_eq!(thinning(ar1(0.2, &mut rng).into_iter(), 1.0, 8), 1);
+        // ρ = 0.9: a step of 10 keeps 92 % of the information, 11 still 90 %, 12 only 89 %.
+        assert_eq!(thinning(ar1(0.9, &mut rng).into_iter(), 1.0, 8), 8);
+        let k = thinning(ar1(0.9, &mut rng).into_iter(), 1.0, 20);
+        assert!((9..=13).contains(&k), "{k}");
+        // ρ = 0.6 keeps 90 % at a step of 2 (0.94) and 3 (0.84 — too little): 2.
+        assert_eq!(thinning(ar1(0.6, &mut rng).into_iter(), 1.0, 8), 2);
+        // Outliers beyond the limit do not count.
+        let mut r = ar1(0.0, &mut rng);
+        for v in r.iter_mut().skip(100).take(300) {
+            *v = 3.0;
+        }
+        assert_eq!(thinning(r.into_iter(), 1.0, 8), 1);
+        assert_eq!(thinning(std::iter::empty(), 1.0, 8), 1);
+    }
+
+    #[test]
+    fn a_long_window_is_thinned_only_where_its_residuals_correlate() {
+        // 1000 samples of a circle of radius 400 px, 0.3 px apart (a 300 px edge), with 0.02 px
+        // of noise, white or AR(1) with ρ = 0.95 (a print's texture), and a pen stroke pushing
+        // 40 of them 3 px inwards.
+        let (r, n) = (400.0, 1000);
+        let noise = Normal::new(0.0, 0.02).unwrap();
+        for (rho, thinned) in [(0.0, false), (0.95, true)] {
+            let mut rng = ChaCha8Rng::seed_from_u64(5);
+            let mut e = 0.0;
+            let pts: Vec<[f64; 2]> = (0..n)
+                .map(|i| {
+                    e = rho * e + (1.0f64 - rho * rho).sqrt() * noise.sample(&mut rng);
+                    let a = (i as f64 - 500.0) * 0.3 / r;
+                    let rr = r + e - if (600..640).contains(&i) { 3.0 } else { 0.0 };
+                    [rr * a.sin(), r - rr * a.cos()]
+                })
+                .collect();
+            let mut sizes = Vec::new();
+            let (curve, fitted, kept) = until_stable(
+                &pts,
+                0..n,
+                |kept| {
+                    sizes.push(kept.len());
+                    let points: Vec<[f64; 2]> = kept.iter().map(|&i| pts[i]).collect();
+                    EdgeCandidates::new(&points, None, EdgeModel::Line, EdgeModel::Conic)?
+                        .choose(BranchGuard::Span)
+                },
+                |f, q| f.curve.distance(q[0], q[1]),
+            )
+            .unwrap();
+            // The first fit uses a spread subset; then all the samples or a thinned set.
+            assert!(sizes[0] <= MAX_FIT_SAMPLES, "{sizes:?}");
+            assert_eq!(fitted < n / 2, thinned, "{rho}: {sizes:?}");
+            // The kept samples span the window and the stroke's samples are dropped.
+            let step = fit_step(n);
+            assert!(kept[0] < step && kept[kept.len() - 1] >= n - step, "{kept:?}");
+            assert!(kept.iter().all(|i| !(600..640).contains(i)), "{kept:?}");
+            let at = curve.curve.distance(0.0, 0.0);
+            assert!(at.abs() < 0.01, "{rho}: {at}");
+        }
     }
 
     #[test]
