@@ -1666,6 +1666,28 @@ impl Basis {
     }
 }
 
+/// The sum of squares of `residuals` (in chain order; `None` marks a left-out sample, which
+/// breaks the chain) and their lag-one correlation `ρ = Σ rᵢ rᵢ₋₁ / Σ rᵢ²`, clamped to
+/// `[0, 0.9]`: beyond 0.9 an AR(1) model of the residuals is no guide.
+pub(crate) fn lag_one_correlation(residuals: impl Iterator<Item = Option<f64>>) -> (f64, f64) {
+    let (mut rss, mut lag, mut prev) = (0.0, 0.0, None);
+    for r in residuals {
+        if let (Some(r), Some(q)) = (r, prev) {
+            lag += r * q;
+        }
+        if let Some(r) = r {
+            rss += r * r;
+        }
+        prev = r;
+    }
+    let rho = if rss > 0.0 {
+        (lag / rss).clamp(0.0, 0.9)
+    } else {
+        0.0
+    };
+    (rss, rho)
+}
+
 /// How well a fitted curve pins its own position: the variance of its position across itself
 /// along the data. With `Φ` the design matrix of the samples in their principal frame (centre,
 /// unit tangent, RMS extent as the unit of `u`) with the polynomial basis of the model (`1, u` for
@@ -1807,22 +1829,10 @@ impl PositionStats {
     /// These statistics with the residual variance of `residuals` (the points' distances from
     /// the fitted curve, in chain order).
     fn with_residuals(self, residuals: impl Iterator<Item = f64>) -> Self {
-        let (mut rss, mut lag, mut prev) = (0.0, 0.0, None);
-        for r in residuals {
-            rss += r * r;
-            if let Some(q) = prev {
-                lag += r * q;
-            }
-            prev = Some(r);
-        }
         // Neighbouring samples share pixel-phase and blur errors, so their residuals correlate;
         // with lag-one correlation ρ > 0 the fit has fewer independent samples than it counts,
         // and the variance of a fitted position grows by about (1 + ρ) / (1 − ρ) (AR(1)).
-        let rho = if rss > 0.0 {
-            (lag / rss).clamp(0.0, 0.9)
-        } else {
-            0.0
-        };
+        let (rss, rho) = lag_one_correlation(residuals.map(Some));
         let rss = rss * (1.0 + rho) / (1.0 - rho);
         Self {
             s2: rss / self.dof,
