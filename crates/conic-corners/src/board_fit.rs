@@ -30,7 +30,10 @@
 //!    of a set of samples fitted once for all the corners that use it, with samples farther
 //!    than 3.5 robust standard deviations
 //!    (MAD) from the curve rejected and the fit repeated until stable, so a pen stroke or
-//!    highlight across an edge does not pull the curve. Where an inflection falls at a corner
+//!    highlight across an edge does not pull the curve. A window of more than 192 samples (squares
+//!    of 100 px and more) is thinned to every k-th sample where its residuals correlate so much
+//!    that the others add little (`thinning`): the print's texture and a JPEG's blocks do, white
+//!    noise does not. Where an inflection falls at a corner
 //!    (an S-shaped surface whose bends meet on a grid line), no conic holds on both sides and
 //!    the two pieces' samples around the corner are fitted together by a curve that bends
 //!    either way, whose tangent at the corner competes with each side's own fit
