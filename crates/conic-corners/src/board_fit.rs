@@ -82,9 +82,9 @@ use std::sync::Mutex;
 pub struct BoardFitParams {
     /// Gaussian blur σ (px) of the image if known; `None` measures it by a pilot walk.
     pub blur: Option<f64>,
-    /// Scanlines between consecutive edge samples (1 = every row or column). A walk along an edge
-    /// shorter than 24 × `stride` px takes the largest stride that gives it 24 scanlines, and one
-    /// under 48 px (small or foreshortened squares) every scanline.
+    /// Scanlines between consecutive edge samples (1 = every row or column). Edges shorter than
+    /// about 12 × `stride` px (foreshortened squares) are sampled on every scanline whatever
+    /// this is.
     pub stride: usize,
     /// Extend each line's chain beyond its first and last corner along the outer squares.
     pub extend: bool,
@@ -648,13 +648,8 @@ const MISS_SPAN_PX: usize = 12;
 const FIRST_SAMPLES_REACH: f64 = 0.5;
 /// Fewest scanlines a walk takes before the stride is raised above 1: a short edge (a
 /// foreshortened square near a silhouette, where the curvature is highest and the corners are
-/// extrapolated farthest, or the squares of 20–50 px of a board across part of the view) is
-/// sampled on every scanline, a long one `stride` apart. A corner's curves hold few samples on
-/// short edges, and under white noise each of them counts: at 12 instead of 24 (walks under
-/// 24 px at stride 1 with `stride = 2`, not under 48) the curved-board benchmark's flattest bin
-/// was 0.0060 px instead of 0.0050 and its stereo reprojection 0.0035 instead of 0.0031. Long
-/// edges do not need it: their windows hold hundreds of samples.
-const DENSE_SCANLINES: f64 = 24.0;
+/// extrapolated farthest) is sampled on every scanline, a long one `stride` apart.
+const DENSE_SCANLINES: f64 = 12.0;
 /// Samples behind each prediction.
 const PREDICT_SAMPLES: usize = 16;
 
