@@ -1333,8 +1333,8 @@ fn robust_fit(
 /// times. Returns the last fit, the number of samples it was made from and the kept set after it;
 /// `None` when a fit fails or fewer than 3 samples are left to fit.
 ///
-/// A window of more than [`MAX_FIT_SAMPLES`] samples is first fitted so to every
-/// [`fit_step`]-th of them; then, about that fit, the residuals of all the samples give the step
+/// A window of more than [`MAX_FIT_SAMPLES`] samples is first fitted (and its outliers
+/// rejected) on every [`fit_step`]-th of its samples; then, about that fit, the residuals of all the samples give the step
 /// at which little information is lost ([`thinning`]), and if that is another step the rejection
 /// goes on with every such sample.
 fn until_stable<F>(
@@ -1349,7 +1349,8 @@ fn until_stable<F>(
     if first_step == 1 {
         return Some((f, fitted, kept));
     }
-    let step = thinning(range.clone().map(|i| distance(&f, &pts[i])), limit, first_step);
+    let residuals: Vec<f64> = range.clone().map(|i| distance(&f, &pts[i])).collect();
+    let step = thinning(residuals.iter().copied(), limit, first_step);
     if step == first_step {
         return Some((f, fitted, kept));
     }
@@ -1357,7 +1358,7 @@ fn until_stable<F>(
     let kept = used
         .iter()
         .copied()
-        .filter(|&i| distance(&f, &pts[i]).abs() <= limit)
+        .filter(|&i| residuals[i - range.start].abs() <= limit)
         .collect();
     let (f, fitted, kept, _) = reject(pts, &used, kept, &mut fit, &distance)?;
     Some((f, fitted, kept))
