@@ -38,6 +38,10 @@ pub struct SegmentationParams {
     pub ancf_min_run: usize,
     /// Pieces shorter than this (samples) are not split further by the ANCF stage.
     pub min_segment: usize,
+    /// The ANCF stage sees only samples at least this far (px) from the previous one it kept, so
+    /// that its chords, smoothing and runs (all counted in samples) span about the same arc
+    /// length whether the edge was sampled on every scanline or on every other one.
+    pub flip_spacing: f64,
 }
 
 impl Default for SegmentationParams {
@@ -51,8 +55,35 @@ impl Default for SegmentationParams {
             flip_noise: 4.0,
             ancf_min_run: 10,
             min_segment: 24,
+            flip_spacing: FLIP_SPACING_PX,
         }
     }
+}
+
+/// Default [`SegmentationParams::flip_spacing`]: the spacing of samples on every other scanline
+/// (2 px along an edge near an axis, up to 2.8 px along a diagonal), less a margin for the walks'
+/// wobble. On every scanline, chords of 16 samples are only 16 px long, and wiggles of the edge
+/// at that scale (a print's grain, a JPEG's blocks) pass for bends: board mode on every scanline
+/// broke the flat boards' lines of OpenCV's stereo photos into up to five pieces (one on every
+/// other scanline), and its neighbour-difference noise there rose from 0.0734 to 0.0757 px; with
+/// the spacing, no line of those photos is split and the noise is 0.0746 px.
+pub const FLIP_SPACING_PX: f64 = 1.9;
+
+/// Indices of the samples of `points` that are at least `spacing` px from the previous kept
+/// one, starting with the first.
+fn spaced(points: &[[f64; 2]], spacing: f64) -> Vec<usize> {
+    let mut kept: Vec<usize> = Vec::with_capacity(points.len());
+    let s2 = spacing * spacing;
+    for (i, p) in points.iter().enumerate() {
+        let far = kept.last().map_or(true, |&j| {
+            let q = points[j];
+            (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) >= s2
+        });
+        if far {
+            kept.push(i);
+        }
+    }
+    kept
 }
 
 /// Absolute second difference of the chain at each interior sample, measured across the chain:
@@ -350,8 +381,8 @@ fn flip_splits(points: &[[f64; 2]], params: &SegmentationParams) -> Vec<usize> {
 
 /// Splits an ordered chain of edge samples into index ranges, each one smooth piece of constant
 /// bending direction: first at discontinuities ([`second_difference_splits`]), then each piece at
-/// the flips of its ANCF curvature ([`ancf`]). The ranges are in order, disjoint and cover
-/// `0..points.len()`; an empty chain gives no range.
+/// the flips of its ANCF curvature ([`ancf`]) among its samples `flip_spacing` apart. The ranges
+/// are in order, disjoint and cover `0..points.len()`; an empty chain gives no range.
 pub fn segment_chain(points: &[[f64; 2]], params: &SegmentationParams) -> Vec<Range<usize>> {
     segment_pieces(points, params)
         .into_iter()
@@ -395,9 +426,11 @@ pub fn segment_pieces(
                 PieceStart::Discontinuity
             },
         );
-        for cut in flip_splits(&points[a..b], params) {
-            out.push((start..a + cut, kind));
-            (start, kind) = (a + cut, PieceStart::Inflection);
+        let kept = spaced(&points[a..b], params.flip_spacing);
+        let thinned: Vec<[f64; 2]> = kept.iter().map(|&i| points[a + i]).collect();
+        for cut in flip_splits(&thinned, params) {
+            out.push((start..a + kept[cut], kind));
+            (start, kind) = (a + kept[cut], PieceStart::Inflection);
         }
         out.push((start..b, kind));
     }
@@ -407,7 +440,7 @@ pub fn segment_pieces(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
+    use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal};
 
@@ -572,6 +605,55 @@ mod tests {
         let (s, _) = s_curve(300.0);
         let right: Vec<[f64; 2]> = s.into_iter().filter(|p| p[0] > 0.0).collect();
         assert_eq!(segment_chain(&right, &params).len(), 1);
+    }
+
+    #[test]
+    fn a_chain_on_every_scanline_splits_where_one_on_every_other_does() {
+        // A straight edge whose samples follow a texture: three wiggles of 0.08 px at wavelengths
+        // of 20–40 px (a print's grain, a JPEG's blocks) and noise of 0.02 px, sampled every
+        // pixel and every 2 px.
+        let wiggly = |step: f64, seed: u64| -> Vec<[f64; 2]> {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let waves: Vec<(f64, f64)> = (0..3)
+                .map(|_| (rng.gen_range(20.0..40.0), rng.gen_range(0.0..std::f64::consts::TAU)))
+                .collect();
+            (0..)
+                .map(|i| i as f64 * step)
+                .take_while(|&t| t < 300.0)
+                .map(|t| {
+                    let w: f64 = waves
+                        .iter()
+                        .map(|(l, ph)| 0.08 * (std::f64::consts::TAU * t / l + ph).sin())
+                        .sum();
+                    [t, 100.0 + w]
+                })
+                .collect()
+        };
+        let params = SegmentationParams::default();
+        let every = SegmentationParams {
+            flip_spacing: 0.0,
+            ..params.clone()
+        };
+        let mut split_when_every = 0;
+        for seed in 0..20 {
+            let (dense, sparse) = (
+                noisy(wiggly(1.0, seed), 0.02, seed),
+                noisy(wiggly(2.0, seed), 0.02, seed),
+            );
+            assert_eq!(segment_chain(&sparse, &params).len(), 1, "seed {seed}");
+            assert_eq!(segment_chain(&dense, &params).len(), 1, "seed {seed}");
+            split_when_every += usize::from(segment_chain(&dense, &every).len() > 1);
+        }
+        // Without the spacing, 16-sample chords see the wiggles as bends.
+        assert!(split_when_every >= 10, "{split_when_every}");
+        // A real inflection is found at the same place on every scanline and on every other one.
+        let (clean, infl) = s_curve(250.0);
+        let dense = noisy(clean, 0.03, 5);
+        let sparse: Vec<[f64; 2]> = dense.iter().copied().step_by(2).collect();
+        let (d, s) = (segment_chain(&dense, &params), segment_chain(&sparse, &params));
+        assert!(d.len() == 2 && s.len() == 2, "{d:?} {s:?}");
+        assert!(d[0].end.abs_diff(infl) <= 4, "{d:?}, inflection at {infl}");
+        assert!(d[0].end.abs_diff(2 * s[0].end) <= 4, "{d:?} {s:?}");
     }
 
     #[test]
