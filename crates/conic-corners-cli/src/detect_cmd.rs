@@ -93,7 +93,7 @@ pub fn detection_json(path: &Path, image: &GrayImage, det: &Detection) -> serde_
                     })
                 })
                 .collect();
-            json!({ "rows": b.rows, "cols": b.cols, "corners": corners })
+            json!({ "rows": b.rows, "cols": b.cols, "sigma_scale": b.sigma_scale, "corners": corners })
         })
         .collect();
     json!({

@@ -252,8 +252,9 @@ fn covariance_array(covs: impl ExactSizeIterator<Item = Option<[[f64; 2]; 2]>>) 
 /// Returns one dict per board, largest first, with keys `rows`, `cols`, `points` (N×2 float64,
 /// x then y), `ids` (N×2 int32, row then col), `scores` (N float64), `status` (N uint8: 0 failed,
 /// 1 fallback, 2 converged), `residuals` (N float64, NaN where not refined), `paths` (N uint8:
-/// 0 local, 1 board), `sigmas` (N float64, NaN where refinement failed) and `covariances`
-/// (N×2×2 float64, px², NaN where refinement failed).
+/// 0 local, 1 board), `sigmas` (N float64, NaN where refinement failed), `covariances`
+/// (N×2×2 float64, px², NaN where refinement failed) and `sigma_scale` (the board's a-posteriori
+/// factor on every σ, or `None`).
 ///
 /// `refine` is `"board"` (board-wide curve fitting, the default) or `"local"`.
 #[pyfunction]
@@ -334,6 +335,7 @@ fn detect<'py>(
             d.set_item("paths", paths.into_pyarray(py))?;
             d.set_item("sigmas", sigmas.into_pyarray(py))?;
             d.set_item("covariances", covariances.into_pyarray(py))?;
+            d.set_item("sigma_scale", board.sigma_scale)?;
             Ok(d)
         })
         .collect()

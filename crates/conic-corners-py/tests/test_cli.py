@@ -116,6 +116,10 @@ def test_detect_equals_cli(cli_bin, board_png, mode):
     assert len(boards) == len(cli_boards)
     for b, c in zip(boards, cli_boards):
         assert (b.rows, b.cols) == (c["rows"], c["cols"])
+        # The board's a-posteriori factor on every sigma: the CLI's, a positive float on this
+        # 9 × 9 board (it has straight runs of six corners).
+        assert b.sigma_scale == c["sigma_scale"]
+        assert isinstance(b.sigma_scale, float) and b.sigma_scale > 0
         assert len(b) == len(c["corners"])
         for i, k in enumerate(c["corners"]):
             assert (b.points[i, 0], b.points[i, 1]) == (k["x"], k["y"])

@@ -1866,6 +1866,7 @@ mod tests {
             rows: 1 + corners.iter().map(|c| c.row as usize).max().unwrap_or(0),
             cols: 1 + corners.iter().map(|c| c.col as usize).max().unwrap_or(0),
             corners,
+            sigma_scale: None,
         }
     }
 
@@ -2295,6 +2296,7 @@ mod tests {
                     cov: None,
                 })
                 .collect(),
+            sigma_scale: None,
         };
         let grid = Grid::new(&board);
         let polarity = |line: &GridLine, print: &dyn Fn(&GridLine) -> Option<f64>| {
@@ -2436,6 +2438,7 @@ mod tests {
             rows: 0,
             cols: 0,
             corners: Vec::new(),
+            sigma_scale: None,
         };
         assert!(fit_board(&r.image, &empty, &p).is_empty());
         let good = board_from_truth(&r.corners, 5);

@@ -18,6 +18,7 @@ use crate::prefilter::{prefilter_scales, PrefilterParams, Scales};
 use crate::quadratic_form::worst_sigma;
 use crate::refine::{refine_one_among, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
+use crate::variance_factor::{self, VarianceFactorParams};
 use crate::GrayImage;
 use nalgebra::{Matrix2, Vector2};
 use rayon::prelude::*;
@@ -83,6 +84,10 @@ pub struct DetectParams {
     /// corner of a border square or a stroke crossing an edge that passed for a junction, or a
     /// junction hidden behind a silhouette; on the real photos there are none.
     pub keep_unrefined: bool,
+    /// The a-posteriori variance factor ([`crate::variance_factor`]): every board's covariances
+    /// are scaled by how far its corners stray from a smooth grid against what they claim
+    /// ([`Board::sigma_scale`]). `None` reports the covariances as the fits gave them.
+    pub variance_factor: Option<VarianceFactorParams>,
 }
 
 /// How [`detect`] places the corners after the pixel-level detection.
@@ -122,6 +127,7 @@ impl Default for DetectParams {
             max_board_sigma: 5.0,
             junction_gate: 1.5,
             keep_unrefined: false,
+            variance_factor: Some(VarianceFactorParams::default()),
         }
     }
 }
@@ -218,6 +224,13 @@ pub struct Board {
     pub cols: usize,
     /// The corners.
     pub corners: Vec<DetectedCorner>,
+    /// The factor by which every corner's σ was scaled ([`crate::variance_factor`]; the
+    /// covariances by its square): how far the corners stray from a smooth grid, measured along
+    /// its straight lines, against the σ their fits claimed. About 1 on clean renders, 2–3 on
+    /// real photos of printed boards. `None` where the board has too few straight runs of six
+    /// corners to tell, or [`DetectParams::variance_factor`] is `None`; the σ are then as the
+    /// fits gave them.
+    pub sigma_scale: Option<f64>,
 }
 
 /// Wall-clock time of each stage, milliseconds.
@@ -311,6 +324,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                     .zip(&b.labels)
                     .map(|(&i, &(row, col))| pixel_corner(&corners[i], row, col))
                     .collect(),
+                sigma_scale: None,
             };
             fit_board_full(image, &pixel, &params.board_fit)
         });
@@ -579,7 +593,16 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             rows: b.rows,
             cols: b.cols,
             corners: refined,
+            sigma_scale: None,
         };
+        if let Some(f) = params
+            .variance_factor
+            .as_ref()
+            .and_then(|vf| variance_factor::variance_factor(&board.corners, vf))
+        {
+            variance_factor::apply(&mut board.corners, f.sigma_scale);
+            board.sigma_scale = Some(f.sigma_scale);
+        }
         // What is left of a board after dropping must still be one (`labels.min_corners`).
         if params.keep_unrefined {
             boards.push(board);
@@ -1037,6 +1060,7 @@ mod tests {
                 corner(2, 1, Status::Converged),
                 corner(2, 2, Status::Failed),
             ],
+            sigma_scale: None,
         };
         drop_unrefined(&mut board);
         let labels: Vec<(i32, i32)> = board.corners.iter().map(|c| (c.row, c.col)).collect();

@@ -18,6 +18,7 @@
 //! | the same along whole grid lines (III-D to III-F) | [`board_fit`] |
 //! | blurred X-junction model fitted to the pixels (short, crowded edges) | [`junction`] |
 //! | last-resort gradient-orthogonality refinement | [`gradient`] |
+//! | a-posteriori variance factor of a board's covariances | [`variance_factor`] |
 //!
 //! [`detect`] runs the whole pipeline on an image.
 //! [`refine`] combines edge sampling and quadratic-form fitting into a single-corner refiner (a more
@@ -40,5 +41,6 @@ pub mod quadratic_form;
 pub mod refine;
 pub mod segmentation;
 pub mod synth;
+pub mod variance_factor;
 
 pub use crate::image::{GrayImage, ImageError};

@@ -100,6 +100,12 @@ class Board:
             eigenvalue. A corner whose row curve is sure and whose column curve is extrapolated
             is known far better across the row than along it; weigh a pose or calibration fit
             with the inverse covariances to use that. NaN where refinement failed.
+        sigma_scale: the factor already applied to every ``sigmas`` value (``covariances`` by
+            its square): how far the corners stray from a smooth grid along its straight lines,
+            against what their fits claimed (an a-posteriori variance factor). About 1 on clean
+            renders, 2–3 on real photos of printed boards, whose edges share errors that the
+            fits' residuals do not show. ``None`` where the board has too few straight runs of
+            six corners to measure it; the sigmas are then as the fits gave them.
 
     A board may have holes (occluded corners), so ``len(board)`` can be less than ``rows * cols``.
     """
@@ -114,6 +120,7 @@ class Board:
     paths: np.ndarray
     sigmas: np.ndarray
     covariances: np.ndarray
+    sigma_scale: Optional[float] = None
 
     def __len__(self) -> int:
         return int(self.points.shape[0])

@@ -48,6 +48,8 @@ class Board:
     """N standard deviations (px, worst direction) of the positions, NaN where refinement failed."""
     covariances: npt.NDArray[np.float64]
     """N×2×2 covariances (px²) of the positions, NaN where refinement failed."""
+    sigma_scale: Optional[float]
+    """Factor already applied to every sigma (a-posteriori, from the grid's smoothness), or None."""
     def __init__(
         self,
         rows: int,
@@ -60,6 +62,7 @@ class Board:
         paths: npt.NDArray[np.uint8],
         sigmas: npt.NDArray[np.float64],
         covariances: npt.NDArray[np.float64],
+        sigma_scale: Optional[float] = None,
     ) -> None: ...
     def __len__(self) -> int: ...
     @property
