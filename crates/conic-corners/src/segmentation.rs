@@ -615,7 +615,12 @@ mod tests {
         let wiggly = |step: f64, seed: u64| -> Vec<[f64; 2]> {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             let waves: Vec<(f64, f64)> = (0..3)
-                .map(|_| (rng.gen_range(20.0..40.0), rng.gen_range(0.0..std::f64::consts::TAU)))
+                .map(|_| {
+                    (
+                        rng.gen_range(20.0..40.0),
+                        rng.gen_range(0.0..std::f64::consts::TAU),
+                    )
+                })
                 .collect();
             (0..)
                 .map(|i| i as f64 * step)
@@ -650,7 +655,10 @@ mod tests {
         let (clean, infl) = s_curve(250.0);
         let dense = noisy(clean, 0.03, 5);
         let sparse: Vec<[f64; 2]> = dense.iter().copied().step_by(2).collect();
-        let (d, s) = (segment_chain(&dense, &params), segment_chain(&sparse, &params));
+        let (d, s) = (
+            segment_chain(&dense, &params),
+            segment_chain(&sparse, &params),
+        );
         assert!(d.len() == 2 && s.len() == 2, "{d:?} {s:?}");
         assert!(d[0].end.abs_diff(infl) <= 4, "{d:?}, inflection at {infl}");
         assert!(d[0].end.abs_diff(2 * s[0].end) <= 4, "{d:?} {s:?}");

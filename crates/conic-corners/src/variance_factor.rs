@@ -32,6 +32,7 @@ use std::collections::HashMap;
 use nalgebra::{Matrix4, Vector4};
 
 use crate::detect::{Cov, DetectedCorner};
+use crate::quadratic_form::fit_line_tls;
 use crate::segmentation::median_in_place;
 
 /// Consecutive corners in a run: a cubic fitted to six leaves two degrees of freedom, whose χ²
@@ -46,8 +47,10 @@ const MEDIAN_CHI2_2: f64 = 2.0 * std::f64::consts::LN_2;
 #[derive(Clone, Debug, PartialEq)]
 pub struct VarianceFactorParams {
     /// A run counts only if no corner lies farther (px) than this from the chord line through it
-    /// (the least-squares line): along a bent line, the positions projected on a chord mix in
-    /// the errors across the line, which consecutive corners share.
+    /// (the total-least-squares line). Along a bent line the spacing follows neither law (a row
+    /// round a cylinder foreshortens fast near a silhouette): with 1 px instead of 0.3, and the
+    /// cubic law alone, the renders' scaled σ put 77 % of the error components within their own
+    /// σ instead of 73 %.
     pub straightness: f64,
     /// Fewer runs than this give no factor (the covariances stay as the fits gave them).
     pub min_windows: usize,
@@ -159,40 +162,30 @@ fn homography_chi2(s: &[f64; RUN], w: &[f64; RUN]) -> Option<f64> {
 /// 76.3 %, where 68.3 % is honest). `None` where the run is not straight within `straightness`
 /// px or a variance is not positive.
 fn run_chi2(p: &[[f64; 2]; RUN], c: &[Cov; RUN], straightness: f64) -> Option<f64> {
-    let n = p.len() as f64;
-    let m = [
-        p.iter().map(|q| q[0]).sum::<f64>() / n,
-        p.iter().map(|q| q[1]).sum::<f64>() / n,
-    ];
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for q in p {
-        let (dx, dy) = (q[0] - m[0], q[1] - m[1]);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
-    // Principal direction of the scatter: the chord line's tangent.
-    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let t = [angle.cos(), angle.sin()];
+    let [a, b, off] = fit_line_tls(p, None)?.coefficients();
+    // The chord line's tangent; the laws' constant terms absorb the origin.
+    let t = [-b, a];
     let mut along = [0.0; RUN];
     let mut weight = [0.0; RUN];
     for (i, (q, cov)) in p.iter().zip(c).enumerate() {
-        let (dx, dy) = (q[0] - m[0], q[1] - m[1]);
-        if (-t[1] * dx + t[0] * dy).abs() > straightness {
+        if (a * q[0] + b * q[1] + off).abs() > straightness {
             return None;
         }
         let v = t[0] * t[0] * cov[0][0] + 2.0 * t[0] * t[1] * cov[0][1] + t[1] * t[1] * cov[1][1];
         if !(v > 0.0 && v.is_finite()) {
             return None;
         }
-        along[i] = t[0] * dx + t[1] * dy;
+        along[i] = t[0] * q[0] + t[1] * q[1];
         weight[i] = 1.0 / v;
     }
-    [cubic_chi2(&along, &weight), homography_chi2(&along, &weight)]
-        .into_iter()
-        .flatten()
-        .filter(|x| x.is_finite())
-        .min_by(f64::total_cmp)
+    [
+        cubic_chi2(&along, &weight),
+        homography_chi2(&along, &weight),
+    ]
+    .into_iter()
+    .flatten()
+    .filter(|x| x.is_finite())
+    .min_by(f64::total_cmp)
 }
 
 /// The a-posteriori variance factor of `corners` (one board, labelled): the median χ² of the
@@ -307,9 +300,15 @@ mod tests {
                 scales.push(f.sigma_scale);
             }
             let mean = scales.iter().sum::<f64>() / scales.len() as f64;
-            assert!((mean / truth - 1.0).abs() < 0.1, "claimed {claimed}: {scales:?}");
+            assert!(
+                (mean / truth - 1.0).abs() < 0.1,
+                "claimed {claimed}: {scales:?}"
+            );
             // One board's estimate, from ~150 overlapping runs, is within a quarter.
-            assert!(scales.iter().all(|s| (s / truth - 1.0).abs() < 0.25), "{scales:?}");
+            assert!(
+                scales.iter().all(|s| (s / truth - 1.0).abs() < 0.25),
+                "{scales:?}"
+            );
         }
     }
 
@@ -319,7 +318,11 @@ mod tests {
         let s: [f64; RUN] = std::array::from_fn(|i| 150.0 * i as f64 / (1.0 + 0.2 * i as f64));
         let w = [1e4; RUN];
         assert!(homography_chi2(&s, &w).unwrap() < 1e-9);
-        assert!(cubic_chi2(&s, &w).unwrap() > 10.0, "{:?}", cubic_chi2(&s, &w));
+        assert!(
+            cubic_chi2(&s, &w).unwrap() > 10.0,
+            "{:?}",
+            cubic_chi2(&s, &w)
+        );
         // A barrel distortion's along-line displacement, cubic in the position: the cubic holds.
         let d: [f64; RUN] = std::array::from_fn(|i| {
             let x = 100.0 * i as f64 - 250.0;

@@ -1268,7 +1268,9 @@ fn the_sigma_scale_keeps_honest_renders_and_widens_the_photos() {
         (Surface::SShape { radius_mm: 90.0 }, 45),
         (Surface::SShape { radius_mm: 90.0 }, 46),
     ] {
-        let r = scene(surface, seed, |_| ()).render(seed).expect("valid scene");
+        let r = scene(surface, seed, |_| ())
+            .render(seed)
+            .expect("valid scene");
         let (det, bare) = (
             detect(&r.image, &DetectParams::default()),
             detect(&r.image, &raw),
@@ -1282,7 +1284,10 @@ fn the_sigma_scale_keeps_honest_renders_and_widens_the_photos() {
             assert_eq!((c.x, c.y, c.row, c.col), (d.x, d.y, d.row, d.col));
             let (s, t) = (c.sigma.expect("σ"), d.sigma.expect("σ"));
             assert!((s - scale * t).abs() <= 1e-12 * s, "{s} {t} {scale}");
-            let Some(truth) = r.corners.iter().find(|t| (t.x - c.x).hypot(t.y - c.y) < 1.5)
+            let Some(truth) = r
+                .corners
+                .iter()
+                .find(|t| (t.x - c.x).hypot(t.y - c.y) < 1.5)
             else {
                 continue;
             };
@@ -1299,7 +1304,10 @@ fn the_sigma_scale_keeps_honest_renders_and_widens_the_photos() {
         within_raw as f64 / total as f64,
     );
     eprintln!("within their own σ: {share:.3} (fits alone {share_raw:.3}) of {total}");
-    assert!((0.58..0.8).contains(&share), "{share} ({share_raw} unscaled)");
+    assert!(
+        (0.58..0.8).contains(&share),
+        "{share} ({share_raw} unscaled)"
+    );
 
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/opencv-stereo");
     let mut scales: Vec<f64> = std::fs::read_dir(&dir)
@@ -1315,7 +1323,10 @@ fn the_sigma_scale_keeps_honest_renders_and_widens_the_photos() {
     assert!(scales.len() >= 18, "{scales:?}");
     scales.sort_by(f64::total_cmp);
     let median = scales[scales.len() / 2];
-    eprintln!("stereo photos: median σ scale {median:.2} over {}", scales.len());
+    eprintln!(
+        "stereo photos: median σ scale {median:.2} over {}",
+        scales.len()
+    );
     assert!((2.0..4.0).contains(&median), "{scales:?}");
 }
 
