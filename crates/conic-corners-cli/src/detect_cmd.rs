@@ -5,6 +5,7 @@ use crate::RefineOptions;
 use clap::Args;
 use conic_corners::board_fit::fit_board_with_curves;
 use conic_corners::detect::{detect, DetectParams, Detection, RefineMode};
+use conic_corners::pattern::Pattern;
 use conic_corners::GrayImage;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -24,6 +25,12 @@ pub struct DetectArgs {
     /// Scale (px) of the Hessian pre-filter; about a fifth of the smallest square side works.
     #[arg(long, default_value_t = DetectParams::default().prefilter.sigma)]
     sigma: f32,
+    /// The board's inner corners, ROWSxCOLS (OpenCV's patternSize (w, h) is hxw): boards that span
+    /// it are labelled in its frame, (0, 0) where the print says (the first square dark; if the
+    /// colours cannot tell, the corner nearest the image's top-left), so that every view labels
+    /// each physical corner alike; other boards are dropped.
+    #[arg(long, value_name = "ROWSxCOLS", value_parser = parse_pattern)]
+    pattern: Option<Pattern>,
     /// Smallest board (corners) reported.
     #[arg(long, default_value_t = DetectParams::default().labels.min_corners)]
     min_board_corners: usize,
@@ -64,6 +71,7 @@ impl DetectArgs {
             ));
         }
         params.labels.min_corners = self.min_board_corners;
+        params.pattern = self.pattern;
         params.refine = self.refine.to_params(params.refine.clone())?;
         params.share_sampling();
         params.mode = if self.mode == "board" {
@@ -74,6 +82,19 @@ impl DetectArgs {
         params.validate()?;
         Ok(params)
     }
+}
+
+/// `ROWSxCOLS` (also `X` or `×`), each at least 2.
+fn parse_pattern(s: &str) -> Result<Pattern, String> {
+    let bad = || format!("expected ROWSxCOLS (inner corners, e.g. 6x9), got {s:?}");
+    let (r, c) = s.split_once(['x', 'X', '×']).ok_or_else(bad)?;
+    let (rows, cols) = (
+        r.trim().parse().map_err(|_| bad())?,
+        c.trim().parse().map_err(|_| bad())?,
+    );
+    let p = Pattern { rows, cols };
+    p.validate()?;
+    Ok(p)
 }
 
 /// JSON object of one image's detection.

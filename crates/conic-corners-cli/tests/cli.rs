@@ -429,6 +429,72 @@ fn detect_rejects_absurd_parameters() {
     );
 }
 
+/// `--pattern ROWSxCOLS`: the board in the print's frame (the renderer's truth labels, whose
+/// first square is dark), turned where the pattern is given the other way round; no board for
+/// another pattern; a clear error for a malformed one.
+#[test]
+fn detect_labels_a_known_pattern_in_its_frame() {
+    let dir = tmp_dir("detect-pattern");
+    let png = dir.join("board.png");
+    let truth = write_board(&png);
+    let p = png.to_str().unwrap();
+    let run = |pattern: &str| {
+        stdout_json(
+            &bin()
+                .args(["detect", p, "--pattern", pattern])
+                .output()
+                .unwrap(),
+        )
+    };
+    let label_of = |c: &serde_json::Value| {
+        let (x, y) = (c["x"].as_f64().unwrap(), c["y"].as_f64().unwrap());
+        let t = truth
+            .iter()
+            .min_by(|a, b| {
+                (a.x - x)
+                    .hypot(a.y - y)
+                    .total_cmp(&(b.x - x).hypot(b.y - y))
+            })
+            .unwrap();
+        (t.row as i64, t.col as i64)
+    };
+    let label = |c: &serde_json::Value| (c["row"].as_i64().unwrap(), c["col"].as_i64().unwrap());
+    let v = run("7x8");
+    let b = &v["boards"][0];
+    assert_eq!(
+        (b["rows"].as_u64(), b["cols"].as_u64()),
+        (Some(7), Some(8)),
+        "{v}"
+    );
+    let corners = b["corners"].as_array().unwrap();
+    assert_eq!(corners.len(), truth.len());
+    for c in corners {
+        assert_eq!(label(c), label_of(c), "{c}");
+    }
+    // 8 rows of 7: the same board a quarter turn on, still dark at the first square.
+    let v = run("8X7");
+    let b = &v["boards"][0];
+    assert_eq!(
+        (b["rows"].as_u64(), b["cols"].as_u64()),
+        (Some(8), Some(7)),
+        "{v}"
+    );
+    for c in b["corners"].as_array().unwrap() {
+        let (r, k) = label_of(c);
+        assert!([(k, 6 - r), (7 - k, r)].contains(&label(c)), "{c}");
+    }
+    assert_eq!(run("6x8")["boards"], serde_json::json!([]));
+    for bad in ["1x8", "7", "7by8", "x8", "-7x8"] {
+        assert_fails(
+            &bin()
+                .args(["detect", p, &format!("--pattern={bad}")])
+                .output()
+                .unwrap(),
+            "pattern",
+        );
+    }
+}
+
 #[test]
 fn detect_board_mode_reports_paths_and_draws_the_curves() {
     let dir = tmp_dir("board-mode");

@@ -13,6 +13,7 @@
 
 use conic_corners::board_fit::Path;
 use conic_corners::detect::{detect as detect_rs, DetectParams, RefineMode};
+use conic_corners::pattern::Pattern;
 use conic_corners::refine::{refine as refine_rs, RefineParams, Status};
 use conic_corners::GrayImage;
 use numpy::ndarray::{Array1, Array2, Array3};
@@ -258,7 +259,7 @@ fn covariance_array(covs: impl ExactSizeIterator<Item = Option<[[f64; 2]; 2]>>) 
 ///
 /// `refine` is `"board"` (board-wide curve fitting, the default) or `"local"`.
 #[pyfunction]
-#[pyo3(signature = (image, corners=None, *, sigma=None, reach=None, blur=None, min_board_corners=None, stride=None, refine="board", bgr=false))]
+#[pyo3(signature = (image, corners=None, *, sigma=None, reach=None, blur=None, min_board_corners=None, stride=None, refine="board", bgr=false, pattern=None))]
 #[allow(clippy::too_many_arguments)]
 fn detect<'py>(
     py: Python<'py>,
@@ -271,6 +272,7 @@ fn detect<'py>(
     stride: Option<i64>,
     refine: &str,
     bgr: bool,
+    pattern: Option<(i64, i64)>,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
     let mode = match refine {
         "board" => RefineMode::Board,
@@ -297,6 +299,18 @@ fn detect<'py>(
     params.refine = refine_params(params.refine.clone(), reach, stride, blur)?;
     params.share_sampling();
     params.mode = mode;
+    params.pattern = match pattern {
+        None => None,
+        Some((rows, cols)) if rows >= 2 && cols >= 2 => Some(Pattern {
+            rows: rows as usize,
+            cols: cols as usize,
+        }),
+        Some((rows, cols)) => {
+            return Err(PyValueError::new_err(format!(
+                "pattern needs at least 2 x 2 inner corners, got ({rows}, {cols})"
+            )))
+        }
+    };
     params.validate().map_err(PyValueError::new_err)?;
     let gray = gray_from_numpy(image, bgr)?;
     let detection = py.detach(|| detect_rs(&gray, &params));

@@ -109,3 +109,28 @@ def test_charuco_photo_labels_match_opencv_s_charuco_ids_and_fit_its_camera():
     opencv = pose_rms(board_points, theirs)
     # Measured: 0.184 px against 0.216 px.
     assert ours < 0.25 and ours < opencv, (ours, opencv)
+
+
+def test_a_known_pattern_labels_every_view_in_the_print_s_frame():
+    """With ``pattern=(6, 9)`` every photo's board comes in the print's frame: (0, 0) at the
+    corner whose first square is dark. On all 26 photos of this sample that is where
+    cv2.findChessboardCorners starts, so in row-major order the corners pair with OpenCV's one to
+    one; calibration can take the object points of every view as they are."""
+    for side in ("left", "right"):
+        for img in photos(side):
+            boards = cc.detect(img, pattern=(6, 9))
+            assert len(boards) == 1
+            b = boards[0]
+            assert (b.rows, b.cols, len(b)) == (6, 9, 54)
+            order = np.lexsort((b.ids[:, 1], b.ids[:, 0]))
+            ok, found = cv2.findChessboardCorners(img, (9, 6))
+            assert ok
+            found = cv2.cornerSubPix(img, found, (5, 5), (-1, -1), CRITERIA)
+            # OpenCV's refined corners lie up to 0.52 px from ours here; a corner paired with
+            # the wrong board point would be a square (20-40 px) away.
+            gap = np.linalg.norm(b.points[order] - found.reshape(-1, 2), axis=1)
+            assert gap.max() < 1.5, gap.max()
+    # No board spans another pattern; a pattern without squares is refused.
+    assert cc.detect(img, pattern=(6, 8)) == []
+    with pytest.raises(ValueError, match="pattern"):
+        cc.detect(img, pattern=(1, 9))

@@ -14,6 +14,7 @@ use crate::connectivity::{
 use crate::election::{elect_scales, Corner, ElectionParams};
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
+use crate::pattern::{to_pattern, Pattern};
 use crate::prefilter::{prefilter_scales, PrefilterParams, Scales};
 use crate::quadratic_form::worst_sigma;
 use crate::refine::{refine_one_among, RefineParams, Status};
@@ -88,6 +89,12 @@ pub struct DetectParams {
     /// are scaled by how far its corners stray from a smooth grid against what they claim
     /// ([`Board::sigma_scale`]). `None` reports the covariances as the fits gave them.
     pub variance_factor: Option<VarianceFactorParams>,
+    /// The board's inner-corner grid, when known (a calibration target): every board that spans
+    /// it is labelled in its frame, `(0, 0)` at a corner of the print that the colours or, failing
+    /// them, the image fix ([`crate::pattern`]), so that all views of the board label each
+    /// physical corner alike; boards that do not span it (partly hidden, or other boards) are
+    /// dropped. `None`: boards of any size, labelled by the image ([`crate::connectivity`]).
+    pub pattern: Option<Pattern>,
 }
 
 /// How [`detect`] places the corners after the pixel-level detection.
@@ -128,6 +135,7 @@ impl Default for DetectParams {
             junction_gate: 1.5,
             keep_unrefined: false,
             variance_factor: Some(VarianceFactorParams::default()),
+            pattern: None,
         }
     }
 }
@@ -170,6 +178,9 @@ impl DetectParams {
         if let Some(j) = &self.junction {
             j.validate()?;
         }
+        if let Some(p) = &self.pattern {
+            p.validate()?;
+        }
         self.refine.validate()
     }
 }
@@ -181,9 +192,10 @@ pub struct DetectedCorner {
     pub x: f64,
     /// Subpixel position (image coordinates).
     pub y: f64,
-    /// Row on the board: rows increase towards +y (see [`crate::connectivity`]).
+    /// Row on the board: rows increase towards +y (see [`crate::connectivity`]), or in the frame
+    /// of [`DetectParams::pattern`] when it is given.
     pub row: i32,
-    /// Column on the board: columns increase towards +x.
+    /// Column on the board: columns increase towards +x, or as `row`.
     pub col: i32,
     /// Template-matching score of the corner (normalized cross-correlation).
     pub score: f64,
@@ -604,13 +616,18 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             board.sigma_scale = Some(f.sigma_scale);
         }
         // What is left of a board after dropping must still be one (`labels.min_corners`).
-        if params.keep_unrefined {
-            boards.push(board);
-        } else {
+        if !params.keep_unrefined {
             drop_unrefined(&mut board);
-            if board.corners.len() >= params.labels.min_corners.max(1) {
-                boards.push(board);
+            if board.corners.len() < params.labels.min_corners.max(1) {
+                continue;
             }
+        }
+        // A board that does not span the pattern cannot be put into its frame.
+        if params
+            .pattern
+            .map_or(true, |p| to_pattern(image, &mut board, p))
+        {
+            boards.push(board);
         }
     }
     // Completion, dropping and the phase check change the sizes the labelling ordered by (a

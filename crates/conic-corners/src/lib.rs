@@ -19,6 +19,7 @@
 //! | blurred X-junction model fitted to the pixels (short, crowded edges) | [`junction`] |
 //! | last-resort gradient-orthogonality refinement | [`gradient`] |
 //! | a-posteriori variance factor of a board's covariances | [`variance_factor`] |
+//! | labels in the frame of a known pattern (calibration) | [`pattern`] |
 //!
 //! [`detect`] runs the whole pipeline on an image.
 //! [`refine`] combines edge sampling and quadratic-form fitting into a single-corner refiner (a more
@@ -36,6 +37,7 @@ pub mod election;
 pub mod gradient;
 pub mod image;
 pub mod junction;
+pub mod pattern;
 pub mod prefilter;
 pub mod quadratic_form;
 pub mod refine;

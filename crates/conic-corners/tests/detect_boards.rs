@@ -1727,3 +1727,73 @@ fn diagonal_motion_blur_on_the_bundled_photo_keeps_the_board() {
     assert!(10 * within_px >= 9 * n, "{within_px} of {n} within 1 px");
     assert_eq!(shifts.len(), 1, "{shifts:?}");
 }
+
+/// A 6 × 9 calibration board (the sum odd, so its print fixes its frame) facing the camera,
+/// tilted by 25° and rolled by `degrees` about the optical axis, flat or on a 200 mm cylinder.
+fn rolled_pattern_scene(degrees: f64, surface: Surface) -> BoardScene {
+    let roll = nalgebra::UnitQuaternion::from_axis_angle(
+        &nalgebra::Vector3::z_axis(),
+        degrees.to_radians(),
+    );
+    BoardScene {
+        rows: 6,
+        cols: 9,
+        surface,
+        pose: nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(0.0, 0.0, 600.0), roll)
+            * tilt(25.0),
+        ..template()
+    }
+}
+
+/// With the pattern given, every view labels each physical corner as the print does (the
+/// renderer's truth labels, whose first square is dark), whatever the camera's roll; without
+/// it, the labels follow the image, and a board rolled by more than 45° is labelled otherwise.
+#[test]
+fn a_known_pattern_labels_every_view_like_the_print() {
+    use conic_corners::pattern::Pattern;
+    let pattern = DetectParams {
+        pattern: Some(Pattern { rows: 6, cols: 9 }),
+        ..DetectParams::default()
+    };
+    for surface in [Surface::Flat, Surface::Cylinder { radius_mm: 200.0 }] {
+        for degrees in [0.0, 70.0, 160.0, 250.0, 330.0] {
+            let what = format!("{surface:?} rolled {degrees}°");
+            let r = rolled_pattern_scene(degrees, surface)
+                .render(3)
+                .expect("valid scene");
+            assert!(r.corners.iter().all(|t| t.visible), "{what}");
+            let truth_label = |x: f64, y: f64| {
+                let t = r
+                    .corners
+                    .iter()
+                    .min_by(|a, b| {
+                        (a.x - x)
+                            .hypot(a.y - y)
+                            .total_cmp(&(b.x - x).hypot(b.y - y))
+                    })
+                    .expect("truth");
+                assert!((t.x - x).hypot(t.y - y) < 0.5, "{what}: false corner");
+                (t.row as i32, t.col as i32)
+            };
+            let det = detect(&r.image, &pattern);
+            assert_eq!(det.boards.len(), 1, "{what}");
+            let b = &det.boards[0];
+            assert_eq!((b.rows, b.cols, b.corners.len()), (6, 9, 54), "{what}");
+            for c in &b.corners {
+                assert_eq!((c.row, c.col), truth_label(c.x, c.y), "{what}");
+            }
+            let plain = detect(&r.image, &DetectParams::default());
+            let same = plain.boards[0]
+                .corners
+                .iter()
+                .all(|c| (c.row, c.col) == truth_label(c.x, c.y));
+            assert_eq!(same, degrees == 0.0 || degrees == 330.0, "{what}");
+            // Another pattern: no board spans it.
+            let other = DetectParams {
+                pattern: Some(Pattern { rows: 6, cols: 8 }),
+                ..DetectParams::default()
+            };
+            assert!(detect(&r.image, &other).boards.is_empty(), "{what}");
+        }
+    }
+}

@@ -80,8 +80,9 @@ class Board:
     """One detected board: its labelled corners, sorted by (row, col).
 
     Attributes:
-        rows: ``1 + max row``; rows increase towards +y.
-        cols: ``1 + max col``; columns increase towards +x.
+        rows: ``1 + max row``; rows increase towards +y (with ``pattern``: the pattern's rows,
+            in the frame of its print).
+        cols: ``1 + max col``; columns increase towards +x (with ``pattern``: its columns).
         points: N×2 ``float64`` subpixel positions, x then y (pixel centres at integers).
         ids: N×2 ``int32`` grid labels, row then col, in the order of ``points``.
         scores: N ``float64`` template-matching scores (normalized cross-correlation).
@@ -165,6 +166,7 @@ def detect(
     stride: Optional[int] = None,
     refine: str = "board",
     bgr: bool = False,
+    pattern: Optional[Tuple[int, int]] = None,
 ) -> List[Board]:
     """Finds every checkerboard(-like) board in ``image`` and refines its corners.
 
@@ -185,6 +187,12 @@ def detect(
             ``"local"`` refines each corner on its own, as
             :func:`refine` does.
         bgr: colour images are in OpenCV's B, G, R order.
+        pattern: ``(rows, cols)`` of the board's inner corners, each ≥ 2, when known (a
+            calibration target; OpenCV's ``patternSize=(w, h)`` is ``(h, w)`` here): boards that
+            span it are labelled in its frame, ``(0, 0)`` where the print says (the first square
+            dark; if the colours cannot tell, the corner nearest the image's top-left), so that
+            every view labels each physical corner alike; other boards are dropped (the CLI's
+            ``--pattern ROWSxCOLS``).
 
     Returns:
         The boards, largest first; empty when no board is in view. Equal to the CLI's output on
@@ -205,6 +213,7 @@ def detect(
         stride=stride,
         refine=refine,
         bgr=bgr,
+        pattern=pattern,
     )
     return [Board(**b) for b in raw]
 

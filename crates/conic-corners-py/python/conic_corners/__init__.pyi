@@ -85,6 +85,7 @@ def detect(
     stride: Optional[int] = None,
     refine: Literal["board", "local"] = "board",
     bgr: bool = False,
+    pattern: Optional[Tuple[int, int]] = None,
 ) -> List[Board]:
     """Finds every board in a grey or colour image; boards largest first."""
 
