@@ -26,10 +26,11 @@
 //!
 //! The colour is measured on the refined corners: each square whose four corners are on the
 //! board is sampled at five points (its centre and its four quarter points, bilinear between the
-//! corners), the median standing for it (a dot or a highlight in a square moves one sample). The
-//! squares of one parity (`(row + col) mod 2`) are dark when their median is below the other
-//! parity's, and at least four fifths of each parity's squares lie on their side of the midpoint
-//! between the two medians; otherwise the colour is unknown.
+//! corners), the median standing for it (a dot or a highlight in a square moves one sample). Each
+//! square votes dark or light against the mean of its side neighbours (so that uneven light,
+//! which changes little from one square to the next, does not sway it); the squares of one parity
+//! (`(row + col) mod 2`) are dark when at least four fifths of the votes say so, and the colour is
+//! unknown otherwise.
 //!
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
@@ -101,7 +102,7 @@ pub fn dark_parity(image: &GrayImage, board: &Board) -> Option<i32> {
         .iter()
         .map(|c| ((c.row, c.col), [c.x, c.y]))
         .collect();
-    let mut by_parity: [Vec<f32>; 2] = [Vec::new(), Vec::new()];
+    let mut squares: HashMap<(i32, i32), f32> = HashMap::new();
     for (&(r, c), &p00) in &at {
         let (Some(&p01), Some(&p10), Some(&p11)) = (
             at.get(&(r, c + 1)),
@@ -127,19 +128,38 @@ pub fn dark_parity(image: &GrayImage, board: &Board) -> Option<i32> {
             }
         }
         if let Some(m) = median(&mut samples[..n]) {
-            by_parity[(r + c).rem_euclid(2) as usize].push(m);
+            squares.insert((r, c), m);
         }
     }
-    let [even, odd] = &mut by_parity;
-    let (me, mo) = (median(even)?, median(odd)?);
-    let mid = 0.5 * (me + mo);
-    let dark = if me < mo { 0 } else { 1 };
-    let share = |v: &[f32], below: bool| {
-        v.iter().filter(|&&g| (g < mid) == below).count() as f64 / v.len() as f64
-    };
-    let clear = me != mo && share(even, dark == 0) >= 0.8 && share(odd, dark == 1) >= 0.8;
-    clear.then_some(dark)
+    // Each square against its side neighbours, which have the other colour: a vote that uneven
+    // light does not sway (it changes little from one square to the next).
+    let (mut votes, mut even_dark) = (0usize, 0usize);
+    for (&(r, c), &g) in &squares {
+        let (sum, n) = [(0, 1), (0, -1), (1, 0), (-1, 0)]
+            .iter()
+            .filter_map(|(dr, dc)| squares.get(&(r + dr, c + dc)))
+            .fold((0.0f32, 0usize), |(s, n), &h| (s + h, n + 1));
+        let d = g - sum / n.max(1) as f32;
+        if n == 0 || d == 0.0 {
+            continue;
+        }
+        votes += 1;
+        even_dark += usize::from((d < 0.0) == ((r + c).rem_euclid(2) == 0));
+    }
+    let share = even_dark as f64 / votes.max(1) as f64;
+    if votes == 0 {
+        None
+    } else if share >= CLEAR_SHARE {
+        Some(0)
+    } else if share <= 1.0 - CLEAR_SHARE {
+        Some(1)
+    } else {
+        None
+    }
 }
+
+/// Share of the squares that must agree on which parity is dark.
+const CLEAR_SHARE: f64 = 0.8;
 
 /// Puts `board` into the frame of `pattern` (see the module docs): turns its labels so that it
 /// has `pattern.rows` rows of `pattern.cols` corners, its first square dark where the colours
@@ -309,6 +329,14 @@ mod tests {
                 Some(if first_dark { 0 } else { 1 })
             );
         }
+        // Light falling off tenfold across the board: its light squares on the dim side are
+        // darker than its dark squares on the bright side.
+        let (mut image, board) = checker(4, 9, 12.0, true);
+        let w = image.width();
+        for (i, g) in image.data_mut().iter_mut().enumerate() {
+            *g *= 1.0 - 0.9 * (i % w) as f32 / w as f32;
+        }
+        assert_eq!(dark_parity(&image, &board), Some(0));
         // A flat image has no colours to tell.
         let (_, board) = checker(4, 5, 12.0, true);
         let flat = GrayImage::filled(72, 60, 0.5).unwrap();
