@@ -10,9 +10,9 @@ and tangential distortion (OpenCV's five coefficients) explains every view's cor
 corners' own errors and what the model leaves out, the same for every method.
 
 Every method's corners are labelled by matching them (within 2 px) to conic-corners' labelled
-board, turned into one frame for all photos (the 9-corner axis as columns, label (0, 0) the grid
-corner nearest the image's top-left), so that left and right views label each corner alike; the
-labels serve only to pair corners with board points, the positions are each method's own.
+board, detected with `--pattern 6x9` so that every view is in the print's frame (6 rows of 9
+corners, the first square dark) and left and right views label each corner alike; the labels serve
+only to pair corners with board points, the positions are each method's own.
 
 Reported per method, for the left and right camera, on the corners that every method found (the
 same corners for all) and then on each method's own:
@@ -52,36 +52,16 @@ MATCH_PX = 2.0
 OURS = ("conic-corners-board", "conic-corners-local")
 
 
-def canonical(corners, shape):
-    """(row, col) -> (x, y) of a labelled board, turned into the frame described above."""
-    rows, cols = shape
-    pts = {(c["row"], c["col"]): (c["x"], c["y"]) for c in corners}
-    if (rows, cols) == (COLS, ROWS):
-        pts = {(c, r): p for (r, c), p in pts.items()}
-    elif (rows, cols) != (ROWS, COLS):
-        return None
-    best = None
-    for fr in (False, True):
-        for fc in (False, True):
-            turned = {(ROWS - 1 - r if fr else r, COLS - 1 - c if fc else c): p
-                      for (r, c), p in pts.items()}
-            # The grid corner labelled (0, 0) nearest the image's top-left (in x + y).
-            x, y = turned.get((0, 0), (np.inf, np.inf))
-            if best is None or x + y < best[0]:
-                best = (x + y, turned)
-    return best[1]
-
-
 def ours(cli, images, mode):
     """{image: (labelled board {(r, c): (x, y)} or None, {(x, y): covariance}, ms)} from
     `conic-corners detect`."""
-    out = subprocess.run([cli, "detect", "--refine", mode, *images], capture_output=True,
-                         text=True, check=True).stdout
+    out = subprocess.run([cli, "detect", "--refine", mode, "--pattern", f"{ROWS}x{COLS}", *images],
+                         capture_output=True, text=True, check=True).stdout
     res = {}
     for line in out.splitlines():
         r = json.loads(line)
         boards = [b for b in r["boards"] if len(b["corners"]) >= 4]
-        board = canonical(boards[0]["corners"], (boards[0]["rows"], boards[0]["cols"])) \
+        board = {(c["row"], c["col"]): (c["x"], c["y"]) for c in boards[0]["corners"]} \
             if boards else None
         cov = {(c["x"], c["y"]): np.array(c["cov"]) for b in boards for c in b["corners"]
                if c.get("cov") is not None}
