@@ -35,6 +35,7 @@
 //! Coordinates: x right, y down, the centre of the top-left pixel is `(0, 0)`.
 
 use crate::detect::{Board, DetectedCorner};
+use crate::segmentation::median_in_place;
 use crate::GrayImage;
 use std::collections::HashMap;
 
@@ -83,16 +84,6 @@ fn turned_extent((rows, cols): (i32, i32), quarter: u8) -> (i32, i32) {
     }
 }
 
-/// Median of `v` (reordered); `None` when empty.
-fn median(v: &mut [f32]) -> Option<f32> {
-    if v.is_empty() {
-        return None;
-    }
-    let mid = v.len() / 2;
-    v.select_nth_unstable_by(mid, f32::total_cmp);
-    Some(v[mid])
-}
-
 /// The parity `(row + col) mod 2` of the board's dark squares (the square between corners
 /// `(r, c)` and `(r + 1, c + 1)` having parity `(r + c) mod 2`); `None` when the colours are not
 /// clear (see the module docs).
@@ -102,7 +93,7 @@ pub fn dark_parity(image: &GrayImage, board: &Board) -> Option<i32> {
         .iter()
         .map(|c| ((c.row, c.col), [c.x, c.y]))
         .collect();
-    let mut squares: HashMap<(i32, i32), f32> = HashMap::new();
+    let mut squares: HashMap<(i32, i32), f64> = HashMap::new();
     for (&(r, c), &p00) in &at {
         let (Some(&p01), Some(&p10), Some(&p11)) = (
             at.get(&(r, c + 1)),
@@ -118,17 +109,17 @@ pub fn dark_parity(image: &GrayImage, board: &Board) -> Option<i32> {
                     + v * ((1.0 - u) * p10[k] + u * p11[k])
             })
         };
-        let mut samples = [0.0f32; 5];
+        let mut samples = [0.0f64; 5];
         let mut n = 0;
         for (u, v) in [(0.5, 0.5), (0.3, 0.3), (0.7, 0.3), (0.3, 0.7), (0.7, 0.7)] {
             let q = point(u, v);
             if let Some(g) = image.bilinear(q[0] as f32, q[1] as f32) {
-                samples[n] = g;
+                samples[n] = f64::from(g);
                 n += 1;
             }
         }
-        if let Some(m) = median(&mut samples[..n]) {
-            squares.insert((r, c), m);
+        if n > 0 {
+            squares.insert((r, c), median_in_place(&mut samples[..n]));
         }
     }
     // Each square against its side neighbours, which have the other colour: a vote that uneven
@@ -138,9 +129,12 @@ pub fn dark_parity(image: &GrayImage, board: &Board) -> Option<i32> {
         let (sum, n) = [(0, 1), (0, -1), (1, 0), (-1, 0)]
             .iter()
             .filter_map(|(dr, dc)| squares.get(&(r + dr, c + dc)))
-            .fold((0.0f32, 0usize), |(s, n), &h| (s + h, n + 1));
-        let d = g - sum / n.max(1) as f32;
-        if n == 0 || d == 0.0 {
+            .fold((0.0, 0usize), |(s, n), &h| (s + h, n + 1));
+        if n == 0 {
+            continue;
+        }
+        let d = g - sum / n as f64;
+        if d == 0.0 {
             continue;
         }
         votes += 1;
@@ -169,10 +163,8 @@ const CLEAR_SHARE: f64 = 0.8;
 pub fn to_pattern(image: &GrayImage, board: &mut Board, pattern: Pattern) -> bool {
     let extent = (board.rows as i32, board.cols as i32);
     let want = (pattern.rows as i32, pattern.cols as i32);
-    let turns: Vec<u8> = (0..4u8)
-        .filter(|&q| turned_extent(extent, q) == want)
-        .collect();
-    if turns.is_empty() {
+    let fits = |q: &u8| turned_extent(extent, *q) == want;
+    if !(0..4u8).any(|q| fits(&q)) {
         return false;
     }
     let dark = dark_parity(image, board);
@@ -200,14 +192,17 @@ pub fn to_pattern(image: &GrayImage, board: &mut Board, pattern: Pattern) -> boo
             })
             .sum()
     };
-    let Some(best) = turns.iter().copied().max_by(|&a, &b| {
-        (first_dark(a), growth(a))
-            .partial_cmp(&(first_dark(b), growth(b)))
-            .unwrap_or(std::cmp::Ordering::Equal)
-            .then(b.cmp(&a))
-    }) else {
-        return false;
-    };
+    // The dark first square, then the growth; ties to the fewest turns.
+    let best = (0..4u8)
+        .filter(fits)
+        .map(|q| (first_dark(q), growth(q), q))
+        .max_by(|a, b| {
+            (a.0, a.1)
+                .partial_cmp(&(b.0, b.1))
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(b.2.cmp(&a.2))
+        })
+        .map_or(0, |k| k.2);
     for c in &mut board.corners {
         (c.row, c.col) = turn((c.row, c.col), best, extent);
     }
