@@ -19,6 +19,7 @@ use crate::prefilter::{prefilter_scales, PrefilterParams, Scales};
 use crate::quadratic_form::worst_sigma;
 use crate::refine::{refine_one_among, RefineParams, Status};
 use crate::segmentation::median_mad_in_place;
+use crate::spacing::{self, SpacingParams};
 use crate::variance_factor::{self, VarianceFactorParams};
 use crate::GrayImage;
 use nalgebra::{Matrix2, Vector2};
@@ -89,6 +90,11 @@ pub struct DetectParams {
     /// are scaled by how far its corners stray from a smooth grid against what they claim
     /// ([`Board::sigma_scale`]). `None` reports the covariances as the fits gave them.
     pub variance_factor: Option<VarianceFactorParams>,
+    /// [`RefineMode::Board`] only: each corner's position along its straight grid lines fused
+    /// with what the spacing law of its six neighbours on each line predicts
+    /// ([`crate::spacing`]), after the variance factor has scaled the covariances that weigh
+    /// them. `None` leaves the corners where the refiners put them.
+    pub spacing: Option<SpacingParams>,
     /// The board's inner-corner grid, when known (a calibration target): every board that spans
     /// it is labelled in its frame, `(0, 0)` at a corner of the print that the colours or, failing
     /// them, the image fix ([`crate::pattern`]), so that all views of the board label each
@@ -135,6 +141,7 @@ impl Default for DetectParams {
             junction_gate: 1.5,
             keep_unrefined: false,
             variance_factor: Some(VarianceFactorParams::default()),
+            spacing: Some(SpacingParams::default()),
             pattern: None,
         }
     }
@@ -614,6 +621,9 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
         {
             variance_factor::apply(&mut board.corners, f.sigma_scale);
             board.sigma_scale = Some(f.sigma_scale);
+        }
+        if let Some(sp) = params.spacing.as_ref().filter(|_| params.mode == RefineMode::Board) {
+            spacing::fuse_along_lines(&mut board.corners, sp);
         }
         // What is left of a board after dropping must still be one (`labels.min_corners`).
         if !params.keep_unrefined {

@@ -19,6 +19,7 @@
 //! | blurred X-junction model fitted to the pixels (short, crowded edges) | [`junction`] |
 //! | last-resort gradient-orthogonality refinement | [`gradient`] |
 //! | a-posteriori variance factor of a board's covariances | [`variance_factor`] |
+//! | spacing law along straight grid lines, fused into each corner | [`spacing`] |
 //! | labels in the frame of a known pattern (calibration) | [`pattern`] |
 //!
 //! [`detect`] runs the whole pipeline on an image.
@@ -42,6 +43,7 @@ pub mod prefilter;
 pub mod quadratic_form;
 pub mod refine;
 pub mod segmentation;
+pub mod spacing;
 pub mod synth;
 pub mod variance_factor;
 

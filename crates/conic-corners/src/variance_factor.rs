@@ -29,16 +29,14 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Matrix4, Vector4};
-
 use crate::detect::{Cov, DetectedCorner};
-use crate::quadratic_form::fit_line_tls;
 use crate::segmentation::median_in_place;
+use crate::spacing::{along, chord, LawFit, LAW_POINTS};
 
 /// Consecutive corners in a run: a cubic fitted to six leaves two degrees of freedom, whose χ²
 /// has the median [`MEDIAN_CHI2_2`]. Five would leave one, with a median of 0.45 that a few
 /// lucky runs pull down; seven need boards of seven corners a side.
-const RUN: usize = 6;
+const RUN: usize = LAW_POINTS;
 
 /// Median of a χ² variable with two degrees of freedom, `2 ln 2`.
 const MEDIAN_CHI2_2: f64 = 2.0 * std::f64::consts::LN_2;
@@ -79,113 +77,27 @@ fn centred(i: usize) -> f64 {
     i as f64 - 0.5 * (RUN - 1) as f64
 }
 
-/// Weighted least squares of `values` on the 4-vectors `rows` (`weights` per value): the
-/// coefficients, `None` where the normal equations are singular.
-fn least_squares(
-    rows: &[Vector4<f64>; RUN],
-    values: &[f64; RUN],
-    weights: &[f64; RUN],
-) -> Option<Vector4<f64>> {
-    let (mut ata, mut atb) = (Matrix4::<f64>::zeros(), Vector4::<f64>::zeros());
-    for ((r, v), w) in rows.iter().zip(values).zip(weights) {
-        ata += *w * r * r.transpose();
-        atb += *w * *v * r;
-    }
-    Some(ata.cholesky()?.solve(&atb))
-}
-
-/// χ² of the along-line positions `s` (weights `w`, the inverse variances) about a cubic in the
-/// run position: the law where lens distortion dominates.
-fn cubic_chi2(s: &[f64; RUN], w: &[f64; RUN]) -> Option<f64> {
-    let rows = std::array::from_fn(|i| {
-        let u = centred(i);
-        Vector4::new(1.0, u, u * u, u * u * u)
-    });
-    let c = least_squares(&rows, s, w)?;
-    Some(
-        (0..RUN)
-            .map(|i| {
-                let u = centred(i);
-                w[i] * (s[i] - (c[0] + u * (c[1] + u * (c[2] + u * c[3])))).powi(2)
-            })
-            .sum(),
-    )
-}
-
-/// χ² of the along-line positions `s` (weights `w`) about `(a + b u + e u²) / (1 + c u)` in the
-/// run position `u`: a 1-D homography (the image of evenly spaced points on a straight line in
-/// space, exact for `e = 0`) with one more term for lens distortion. A cubic misses strong
-/// perspective over large squares: on 9 × 9 boards of 90–140 px squares in random poses, the
-/// true positions of a run left χ² of 5–27 at the 0.01–0.02 px that those corners claim. Solved linearly in `s (1 + c u)` and
-/// refined by Gauss–Newton steps; `None` where the pole comes near the run.
-fn homography_chi2(s: &[f64; RUN], w: &[f64; RUN]) -> Option<f64> {
-    let linear = std::array::from_fn(|i| {
-        let u = centred(i);
-        Vector4::new(1.0, u, u * u, -u * s[i])
-    });
-    let mut p = least_squares(&linear, s, w)?;
-    let model = |p: &Vector4<f64>, u: f64| {
-        let d = 1.0 + p[3] * u;
-        (d, (p[0] + u * (p[1] + u * p[2])) / d)
-    };
-    for _ in 0..6 {
-        let mut rows = [Vector4::zeros(); RUN];
-        let mut r = [0.0; RUN];
-        for i in 0..RUN {
-            let u = centred(i);
-            let (d, f) = model(&p, u);
-            if d < 0.2 {
-                return None;
-            }
-            rows[i] = Vector4::new(1.0 / d, u / d, u * u / d, -u * f / d);
-            r[i] = s[i] - f;
-        }
-        p += least_squares(&rows, &r, w)?;
-    }
-    let mut chi2 = 0.0;
-    for i in 0..RUN {
-        let (d, f) = model(&p, centred(i));
-        if d < 0.2 {
-            return None;
-        }
-        chi2 += w[i] * (s[i] - f).powi(2);
-    }
-    Some(chi2)
-}
-
 /// χ² of one run `p[i]` (image coordinates) with covariances `c[i]`, `i = 0..RUN`: the
-/// along-chord positions' residuals from the better of two smooth laws in the run position
-/// ([`cubic_chi2`], [`homography_chi2`]; each has four parameters, two degrees of freedom on six
-/// corners), over their along-chord variances. Taking the better of two is biased low a little
-/// where both hold; on the curved-board benchmark's renders the scaled covariances then put 70.5 %
-/// of the error components within their own σ (a cubic alone: 73.3 %, the homography alone
-/// 76.3 %, where 68.3 % is honest). `None` where the run is not straight within `straightness`
-/// px or a variance is not positive.
+/// along-chord positions' residuals from the better of the two smooth laws of
+/// [`crate::spacing`] in the run position (each has four parameters, two degrees of freedom on
+/// six corners), over their along-chord variances. Taking the better of two is biased low a
+/// little where both hold; on the curved-board benchmark's renders the scaled covariances then
+/// put 70.5 % of the error components within their own σ (a cubic alone: 73.3 %, the homography
+/// alone 76.3 %, where 68.3 % is honest). `None` where the run is not straight within
+/// `straightness` px or a variance is not positive.
 fn run_chi2(p: &[[f64; 2]; RUN], c: &[Cov; RUN], straightness: f64) -> Option<f64> {
-    let [a, b, off] = fit_line_tls(p, None)?.coefficients();
-    // The chord line's tangent; the laws' constant terms absorb the origin.
-    let t = [-b, a];
-    let mut along = [0.0; RUN];
-    let mut weight = [0.0; RUN];
+    let (origin, t) = chord(p, straightness)?;
+    let mut s = [0.0; RUN];
+    let mut w = [0.0; RUN];
     for (i, (q, cov)) in p.iter().zip(c).enumerate() {
-        if (a * q[0] + b * q[1] + off).abs() > straightness {
-            return None;
-        }
-        let v = t[0] * t[0] * cov[0][0] + 2.0 * t[0] * t[1] * cov[0][1] + t[1] * t[1] * cov[1][1];
+        let v = along(cov, t);
         if !(v > 0.0 && v.is_finite()) {
             return None;
         }
-        along[i] = t[0] * q[0] + t[1] * q[1];
-        weight[i] = 1.0 / v;
+        s[i] = t[0] * (q[0] - origin[0]) + t[1] * (q[1] - origin[1]);
+        w[i] = 1.0 / v;
     }
-    [
-        cubic_chi2(&along, &weight),
-        homography_chi2(&along, &weight),
-    ]
-    .into_iter()
-    .flatten()
-    .filter(|x| x.is_finite())
-    .min_by(f64::total_cmp)
+    Some(LawFit::best(&std::array::from_fn(centred), &s, &w)?.chi2)
 }
 
 /// The a-posteriori variance factor of `corners` (one board, labelled): the median χ² of the
@@ -246,7 +158,7 @@ pub fn apply(corners: &mut [DetectedCorner], sigma_scale: f64) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::board_fit::Path;
     use crate::refine::Status;
@@ -256,7 +168,13 @@ mod tests {
 
     /// A `rows × cols` grid seen in perspective (a homography) with a barrel distortion, its
     /// corners moved by isotropic noise of `noise` px and claiming σ `claimed` px.
-    fn grid(rows: i32, cols: i32, noise: f64, claimed: f64, seed: u64) -> Vec<DetectedCorner> {
+    pub(crate) fn grid(
+        rows: i32,
+        cols: i32,
+        noise: f64,
+        claimed: f64,
+        seed: u64,
+    ) -> Vec<DetectedCorner> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let n = Normal::new(0.0, noise.max(1e-300)).unwrap();
         let mut out = Vec::new();
@@ -313,22 +231,10 @@ mod tests {
     }
 
     #[test]
-    fn a_strong_perspective_is_followed_by_the_homography() {
-        // Squares of 150 px shrinking by a fifth per square, claiming σ 0.01 px.
+    fn a_straight_run_in_strong_perspective_has_no_chi2() {
+        // Squares of 150 px shrinking by a fifth per square, claiming σ 0.01 px: the homography
+        // law holds (the cubic alone would not, see `crate::spacing`'s tests).
         let s: [f64; RUN] = std::array::from_fn(|i| 150.0 * i as f64 / (1.0 + 0.2 * i as f64));
-        let w = [1e4; RUN];
-        assert!(homography_chi2(&s, &w).unwrap() < 1e-9);
-        assert!(
-            cubic_chi2(&s, &w).unwrap() > 10.0,
-            "{:?}",
-            cubic_chi2(&s, &w)
-        );
-        // A barrel distortion's along-line displacement, cubic in the position: the cubic holds.
-        let d: [f64; RUN] = std::array::from_fn(|i| {
-            let x = 100.0 * i as f64 - 250.0;
-            x * (1.0 - 4e-7 * x * x)
-        });
-        assert!(cubic_chi2(&d, &w).unwrap() < 1e-9);
         assert!(run_chi2(
             &std::array::from_fn(|i| [s[i], 0.5 * s[i]]),
             &[[[1e-4, 0.0], [0.0, 1e-4]]; RUN],
