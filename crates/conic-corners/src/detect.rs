@@ -382,13 +382,6 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             .enumerate()
             .map(|(k, (&i, &(row, col)))| {
                 let pixel = pixel_corner(&corners[i], row, col);
-                // A labelled 4-neighbour is missing: the board's last row or column, or beside
-                // an occluder or a silhouette.
-                let boundary = || {
-                    [(0, 1), (0, -1), (1, 0), (-1, 0)]
-                        .iter()
-                        .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)))
-                };
                 // The curves' intersection, also where it lies farther than the board fit's
                 // `max_shift` from the pixel-level corner if it is sure enough to need no junction
                 // fit: on large squares the election's pixel can be 2–5 px off the junction (a
@@ -431,17 +424,9 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         {
                             match junction_corner(image, &corners, b, i, c, j, false) {
                                 // Where they disagree, the one that claims the smaller σ along
-                                // their difference; on the boundary, the junction model. There
-                                // the board's curves end at the corner or run on along border
-                                // squares narrowed by a silhouette, and their covariance (from
-                                // the samples' scatter) misses what the model's extrapolation
-                                // and a sliver's far edge do to them: on the curved-board
-                                // benchmark's 160 views of seeds 2026 and 3000 the two disagreed
-                                // at 3 boundary corners, where the board answers were 0.07–0.25
-                                // px off (claiming σ ≤ 0.03 px) and the junction model's answers
-                                // 0.03 px.
+                                // their difference.
                                 Some(jc) => fuse(c, jc).unwrap_or_else(|| {
-                                    if boundary() || surer_along_difference(&jc, &c) {
+                                    if surer_along_difference(&jc, &c) {
                                         jc
                                     } else {
                                         c
@@ -546,6 +531,11 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 // it if it claims the smaller σ. Not inside the board: at an S's inflection the
                 // model (one curvature per edge) is biased by 0.02–0.03 px where the local
                 // refiner is not.
+                let boundary = || {
+                    [(0, 1), (0, -1), (1, 0), (-1, 0)]
+                        .iter()
+                        .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)))
+                };
                 let doubtful = !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
                 if let Some(j) = junction.as_ref().filter(|_| doubtful) {
                     if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
