@@ -18,7 +18,12 @@
 //!    crossing edge. The walk starts along the line's tangent at the corner (quadratic through
 //!    three corners) and then predicts each crossing from a line through the last samples. Beyond
 //!    the first and last corner the edge continues along the outer squares: the chain is extended
-//!    there until the edge ends. The blur σ is measured by a pilot walk over a few segments.
+//!    there until the edge ends. The blur σ is measured by a pilot walk over a few segments,
+//!    and so is the residual RMS of a clean profile: a profile fitted more than twice as poorly
+//!    whose window holds a second edge (the far side of a square a few pixels wide beside a
+//!    silhouette, or the background beyond a board's border squares) is fitted again with that
+//!    edge in the model (`edge_sampling::refit_two_edges`), which would otherwise pull it by a
+//!    tenth of a pixel or more, the same way along the whole edge.
 //!    The offset between the line's two polarities (a print's dot gain moves every edge towards
 //!    its light side, so consecutive segments are offset across the line) is measured at the
 //!    corners and removed (`apply_polarity`), which puts every corner at the centre of its
@@ -64,7 +69,8 @@
 use crate::detect::Board;
 use crate::edge_sampling::{
     blur_sigma_from_widths, crossing_offset, logistic_width, next_scanline_point,
-    profile_half_width, sample_edge_bounded, sample_edge_with, Axis, ScanBounds, SigmoidParams,
+    profile_half_width, refit_two_edges, round as edge_round, sample_edge_bounded,
+    sample_edge_with, second_edge, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
     corner_covariance, edge_jump, fit_edge_curve_among, lag_one_correlation, nearest_intersection,
@@ -306,13 +312,17 @@ pub fn fit_board_with_curves(
 /// The work of [`fit_board`]; `whole_pieces` also fits every piece whole, for drawing.
 fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: bool) -> BoardFit {
     let grid = Grid::new(board);
+    let pilot = pilot_walk(image, &grid, params.stride.max(1));
     let sigma = params
         .blur
         .filter(|b| b.is_finite() && *b >= 0.0)
-        .or_else(|| pilot_blur(image, &grid, params.stride.max(1)))
+        .or(pilot.and_then(|p| p.0))
         .unwrap_or(1.5)
         .clamp(0.5, 12.0);
-    let cfg = WalkConfig::new(sigma, params.stride.max(1));
+    let cfg = WalkConfig {
+        typical_rms: pilot.map(|p| p.1),
+        ..WalkConfig::new(sigma, params.stride.max(1))
+    };
     let chains: Vec<Chain> = grid
         .lines
         .par_iter()
@@ -555,6 +565,9 @@ struct WalkConfig {
     guard: f64,
     stride: usize,
     sigmoid: SigmoidParams,
+    /// Median residual RMS (intensity units) of the pilot walk's profile fits: what a profile
+    /// of one clean edge leaves on this board.
+    typical_rms: Option<f64>,
 }
 
 impl WalkConfig {
@@ -564,6 +577,7 @@ impl WalkConfig {
             start: 2.5 * sigma + 3.0,
             guard: 2.5 * sigma + 1.0,
             stride,
+            typical_rms: None,
             sigmoid: SigmoidParams {
                 min_contrast_to_noise: 3.0,
                 ..SigmoidParams::default()
@@ -727,13 +741,45 @@ fn walk_edge(
         let n = out.len() - first;
         // Near a junction the window stops short of the crossing edge; its cut side constrains
         // the sigmoid's width poorly, so the width is the measured blur's.
+        let along = if steep { d[1] } else { d[0] };
+        let fixed = (logistic_width(cfg.sigma) / along.abs().max(0.5)) as f32;
         let sample = if clash {
-            let along = if steep { d[1] } else { d[0] };
-            let fixed = (logistic_width(cfg.sigma) / along.abs().max(0.5)) as f32;
             sample_edge_bounded(image, q, d, hw, bounds, Some(fixed), &cfg.sigmoid)
         } else {
             sample_edge_with(image, q, d, hw, None, &cfg.sigmoid)
         };
+        // A profile that fits far worse than the board's typical one may hold a second edge
+        // (the far side of a square narrowed by a silhouette, the background beyond a board's
+        // border squares): fitted again with it, both of the blur's width. Seed 3000 of the
+        // curved-board benchmark, pair 17 left: the border column's samples lay 0.11–0.20 px
+        // inwards, its corners 0.12–0.25 px off claiming σ 0.03 px (BENCHMARKS.md).
+        let sample = sample.map(|s| {
+            let poor = cfg
+                .typical_rms
+                .is_some_and(|r| s.fit.rms > RESIDUAL_LIMIT * r);
+            if !poor {
+                return s;
+            }
+            let (lo, hi) = second_edge(image, &s, hw);
+            let along_scan = if s.axis == Axis::X {
+                s.point[0]
+            } else {
+                s.point[1]
+            };
+            let centre = edge_round(along_scan);
+            let (wlo, whi) = (
+                bounds.lo.max(centre - hw as f64),
+                bounds.hi.min(centre + hw as f64),
+            );
+            // The nearer departure, if inside the window; the far edge about a pixel beyond.
+            let far = match (lo > wlo, hi < whi) {
+                (true, true) if along_scan - lo <= hi - along_scan => lo - 1.0,
+                (true, true) | (false, true) => hi + 1.0,
+                (true, false) => lo - 1.0,
+                (false, false) => return s,
+            };
+            refit_two_edges(image, &s, wlo, whi, far, fixed as f64).unwrap_or(s)
+        });
         let accepted = sample.and_then(|s| {
             // Signed contrast across the walk's left normal, whatever the scan axis.
             let along_scan = if s.axis == Axis::X { -d[1] } else { d[0] };
@@ -872,28 +918,35 @@ fn segment_walk(grid: &Grid, a: usize, b: usize, k: usize) -> Option<Walk> {
     })
 }
 
-/// Blur σ from a pilot walk (free sigmoid widths, generous windows) over up to eight segments
+/// Blur σ (`None` if too few windows were clear) and the median residual RMS of the profile
+/// fits from a pilot walk (free sigmoid widths, generous windows) over up to eight segments
 /// near the middle of the longest line. The windows and the junctions' clearances follow a
 /// guessed blur of 2 px; where that leaves fewer than 8 windows clear of the crossing edges
 /// (squares of 15–20 px in the turned renders of BENCHMARKS.md, where 15 px squares turned by
 /// 40–45° needed the last), guesses of 1 and then 0.5 px are tried.
-fn pilot_blur(image: &GrayImage, grid: &Grid, stride: usize) -> Option<f64> {
+fn pilot_walk(image: &GrayImage, grid: &Grid, stride: usize) -> Option<(Option<f64>, f64)> {
     let line = grid.lines.iter().max_by_key(|l| l.corners.len())?;
     let k = usize::from(line.kind == LineKind::Column);
     let mid = line.corners.len() / 2;
     let lo = mid.saturating_sub(4);
-    [2.0, 1.0, 0.5].into_iter().find_map(|guess| {
+    let mut rms = Vec::new();
+    let blur = [2.0, 1.0, 0.5].into_iter().find_map(|guess| {
         let cfg = WalkConfig::new(guess, stride);
         let (mut pts, mut widths) = (Vec::new(), Vec::new());
+        rms.clear();
         for j in lo..(lo + 8).min(line.corners.len() - 1) {
             if let Some(mut w) = segment_walk(grid, line.corners[j], line.corners[j + 1], k) {
                 w.limit -= cfg.start;
-                walk_edge(image, &w, &cfg, &mut pts, Some(&mut widths), None);
+                walk_edge(image, &w, &cfg, &mut pts, Some(&mut widths), Some(&mut rms));
             }
         }
         (widths.len() >= 8)
             .then(|| blur_sigma_from_widths(&widths))
             .flatten()
+    });
+    (!rms.is_empty()).then(|| {
+        rms.sort_by(f64::total_cmp);
+        (blur, rms[rms.len() / 2])
     })
 }
 
