@@ -1117,79 +1117,83 @@ pub(crate) fn refit_two_edges(
         } as f64;
     }
     let y = &y[..n];
-    // The linear coefficients and the residual sum of squares for edges at `p`, `q`.
-    let solve = |p: f64, q: f64| -> Option<(nalgebra::Vector3<f64>, f64)> {
+    // Gauss–Newton (Levenberg–Marquardt damped) on `(a, b, d, p, q)`, started at the sample's
+    // edge and `far` with the levels those imply (a linear solve): two logistics per sample and
+    // pass, a 5 × 5 solve.
+    let f = &sample.fit;
+    let levels = {
         let mut m = nalgebra::Matrix3::<f64>::zeros();
         let mut r = nalgebra::Vector3::<f64>::zeros();
         for (k, &v) in y.iter().enumerate() {
             let s = first + k as f64;
             let row = nalgebra::Vector3::new(
-                1.0 / (1.0 + (-(s - p) / width).exp()),
-                1.0 / (1.0 + (-(s - q) / width).exp()),
+                1.0 / (1.0 + (-(s - along) / width).exp()),
+                1.0 / (1.0 + (-(s - far) / width).exp()),
                 1.0,
             );
             m += row * row.transpose();
             r += row * v;
         }
-        let c = m.try_inverse()? * r;
-        let sse = y
-            .iter()
+        m.try_inverse()? * r
+    };
+    let mut x = [levels[0], levels[1], levels[2], along, far];
+    let sse_of = |x: &[f64; 5]| -> f64 {
+        y.iter()
             .enumerate()
             .map(|(k, &v)| {
                 let s = first + k as f64;
-                let f = c[0] / (1.0 + (-(s - p) / width).exp())
-                    + c[1] / (1.0 + (-(s - q) / width).exp())
-                    + c[2];
-                (v - f) * (v - f)
+                let l1 = 1.0 / (1.0 + (-(s - x[3]) / width).exp());
+                let l2 = 1.0 / (1.0 + (-(s - x[4]) / width).exp());
+                let r = v - (x[0] * l1 + x[1] * l2 + x[2]);
+                r * r
             })
-            .sum::<f64>();
-        Some((c, sse))
+            .sum()
     };
-    let (mut p, mut q) = (along, far);
-    let (_, mut sse) = solve(p, q)?;
-    let h = 1e-4;
-    for _ in 0..20 {
-        // Two parameters: the gradient and Hessian of the sum of squares by differences cost
-        // five more solves of a 3 × 3 system, and the path runs on few profiles.
-        let (_, sp) = solve(p + h, q)?;
-        let (_, sm) = solve(p - h, q)?;
-        let (_, sq) = solve(p, q + h)?;
-        let (_, sqm) = solve(p, q - h)?;
-        let (_, spq) = solve(p + h, q + h)?;
-        let g = [(sp - sm) / (2.0 * h), (sq - sqm) / (2.0 * h)];
-        let hpp = (sp - 2.0 * sse + sm) / (h * h);
-        let hqq = (sq - 2.0 * sse + sqm) / (h * h);
-        let hpq = (spq - sp - sq + sse) / (h * h);
-        let det = hpp * hqq - hpq * hpq;
-        let mut step = if hpp > 0.0 && det > 0.0 {
-            [
-                -(hqq * g[0] - hpq * g[1]) / det,
-                -(hpp * g[1] - hpq * g[0]) / det,
-            ]
-        } else {
-            [-g[0].signum() * 0.1, -g[1].signum() * 0.1]
-        };
-        let big = step[0].abs().max(step[1].abs());
-        if big > 0.5 {
-            step = [step[0] * 0.5 / big, step[1] * 0.5 / big];
+    let mut sse = sse_of(&x);
+    let mut lambda = 1e-3;
+    for _ in 0..TWO_EDGE_ITERATIONS {
+        let mut jtj = nalgebra::SMatrix::<f64, 5, 5>::zeros();
+        let mut jtr = nalgebra::SVector::<f64, 5>::zeros();
+        for (k, &v) in y.iter().enumerate() {
+            let s = first + k as f64;
+            let l1 = 1.0 / (1.0 + (-(s - x[3]) / width).exp());
+            let l2 = 1.0 / (1.0 + (-(s - x[4]) / width).exp());
+            let r = v - (x[0] * l1 + x[1] * l2 + x[2]);
+            let j = nalgebra::SVector::<f64, 5>::from([
+                l1,
+                l2,
+                1.0,
+                -x[0] * l1 * (1.0 - l1) / width,
+                -x[1] * l2 * (1.0 - l2) / width,
+            ]);
+            jtj += j * j.transpose();
+            jtr += j * r;
         }
-        let mut taken = false;
-        for _ in 0..6 {
-            if let Some((_, s)) = solve(p + step[0], q + step[1]) {
-                if s < sse {
-                    (p, q, sse, taken) = (p + step[0], q + step[1], s, true);
+        // The step that lowers the sum of squares, its largest move of an edge.
+        let mut taken = None;
+        for _ in 0..4 {
+            let mut m = jtj;
+            for i in 0..5 {
+                m[(i, i)] += lambda * (1.0 + m[(i, i)]);
+            }
+            if let Some(step) = m.lu().solve(&jtr) {
+                let trial = std::array::from_fn(|i| x[i] + step[i]);
+                let t = sse_of(&trial);
+                if t < sse {
+                    (x, sse) = (trial, t);
+                    taken = Some(step[3].abs().max(step[4].abs()));
+                    lambda = (lambda * 0.3).max(1e-9);
                     break;
                 }
             }
-            step = [0.5 * step[0], 0.5 * step[1]];
+            lambda *= 10.0;
         }
-        if !taken || step[0].abs().max(step[1].abs()) < 1e-4 {
+        if taken.map_or(true, |moved| moved < 1e-4) {
             break;
         }
     }
-    let (c, sse) = solve(p, q)?;
+    let (c, p, q) = ([x[0], x[1], x[2]], x[3], x[4]);
     let rms = (sse / n as f64).sqrt();
-    let f = &sample.fit;
     let side = (far - along).signum();
     let ok = c[1] * c[0] < 0.0
         && (q - p) * side > width
@@ -1216,6 +1220,9 @@ pub(crate) fn refit_two_edges(
         }
     })
 }
+
+/// Gauss–Newton passes of [`refit_two_edges`] at most.
+const TWO_EDGE_ITERATIONS: usize = 12;
 
 /// Largest share of the one-edge fit's residual RMS that [`refit_two_edges`] may leave: the
 /// second edge must explain most of what one edge left.
