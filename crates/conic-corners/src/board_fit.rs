@@ -70,7 +70,7 @@ use crate::detect::Board;
 use crate::edge_sampling::{
     blur_sigma_from_widths, crossing_offset, logistic_width, next_scanline_point,
     profile_half_width, refit_two_edges, round as edge_round, sample_edge_bounded,
-    sample_edge_with, second_edge, Axis, ScanBounds, SigmoidParams,
+    sample_edge_with, scan_coordinates, second_edge, Axis, ScanBounds, SigmoidParams,
 };
 use crate::quadratic_form::{
     corner_covariance, edge_jump, fit_edge_curve_among, lag_one_correlation, nearest_intersection,
@@ -312,6 +312,7 @@ pub fn fit_board_with_curves(
 /// The work of [`fit_board`]; `whole_pieces` also fits every piece whole, for drawing.
 fn run(image: &GrayImage, board: &Board, params: &BoardFitParams, whole_pieces: bool) -> BoardFit {
     let grid = Grid::new(board);
+    // Also with a given blur: the pilot's residual is what the two-edge refit is gated by.
     let pilot = pilot_walk(image, &grid, params.stride.max(1));
     let sigma = params
         .blur
@@ -761,11 +762,7 @@ fn walk_edge(
                 return s;
             }
             let (lo, hi) = second_edge(image, &s, hw);
-            let along_scan = if s.axis == Axis::X {
-                s.point[0]
-            } else {
-                s.point[1]
-            };
+            let (_, along_scan) = scan_coordinates(&s);
             let centre = edge_round(along_scan);
             let (wlo, whi) = (
                 bounds.lo.max(centre - hw as f64),

@@ -969,6 +969,22 @@ fn scanline_fit(
     n: usize,
     fit: impl FnOnce(&[f32]) -> Option<SigmoidFit>,
 ) -> Option<(f64, SigmoidFit)> {
+    let mut column = [0f32; MAX_SAMPLES];
+    let profile = scanline(image, axis, fixed, first, n, &mut column)?;
+    Some((first, fit(profile)?))
+}
+
+/// The `n` pixels of the row (`Axis::X`, `y = fixed`) or column (`Axis::Y`, `x = fixed`) from
+/// pixel `first` of the scanline on: a row in place, a column copied into `column`. `None`
+/// outside the image or beyond [`MAX_SAMPLES`].
+fn scanline<'a>(
+    image: &'a GrayImage,
+    axis: Axis,
+    fixed: f64,
+    first: f64,
+    n: usize,
+    column: &'a mut [f32; MAX_SAMPLES],
+) -> Option<&'a [f32]> {
     let (len_fixed, len_scan) = match axis {
         Axis::X => (image.height(), image.width()),
         Axis::Y => (image.width(), image.height()),
@@ -980,8 +996,7 @@ fn scanline_fit(
         return None;
     }
     let (fixed_i, first_i) = (fixed as usize, first as usize);
-    let mut column = [0f32; MAX_SAMPLES];
-    let profile: &[f32] = match axis {
+    Some(match axis {
         Axis::X => &image.row(fixed_i)[first_i..first_i + n],
         Axis::Y => {
             for (k, v) in column[..n].iter_mut().enumerate() {
@@ -989,8 +1004,22 @@ fn scanline_fit(
             }
             &column[..n]
         }
-    };
-    Some((first, fit(profile)?))
+    })
+}
+
+/// The scanline of `sample` (its row's y for [`Axis::X`], its column's x for [`Axis::Y`]) and
+/// the edge's position along it.
+pub(crate) fn scan_coordinates(sample: &EdgeSample) -> (f64, f64) {
+    match sample.axis {
+        Axis::X => (sample.point[1], sample.point[0]),
+        Axis::Y => (sample.point[0], sample.point[1]),
+    }
+}
+
+/// The logistic `1 / (1 + exp(−(s − p) / c))` of an edge at `p` of width `c`, at `s`.
+#[inline]
+fn logistic(s: f64, p: f64, c: f64) -> f64 {
+    1.0 / (1.0 + (-(s - p) / c).exp())
 }
 
 /// The point `stride` scanlines on from `anchor` along an edge of direction `d` (not necessarily
@@ -1038,10 +1067,7 @@ pub(crate) fn crossing_offset(
 /// window of its near edge, and the fit, taking it for part of the plateau, moves by tenths of
 /// a pixel, the same way along the whole edge.
 pub(crate) fn second_edge(image: &GrayImage, sample: &EdgeSample, half_width: usize) -> (f64, f64) {
-    let (fixed, along) = match sample.axis {
-        Axis::X => (sample.point[1], sample.point[0]),
-        Axis::Y => (sample.point[0], sample.point[1]),
-    };
+    let (fixed, along) = scan_coordinates(sample);
     let (len_fixed, len_scan) = match sample.axis {
         Axis::X => (image.height(), image.width()),
         Axis::Y => (image.width(), image.height()),
@@ -1057,7 +1083,7 @@ pub(crate) fn second_edge(image: &GrayImage, sample: &EdgeSample, half_width: us
             Axis::Y => image.get(fixed as usize, k as usize) as f64,
         })
     };
-    let model = |k: f64| f.amplitude / (1.0 + (-(k - along) / f.width).exp()) + f.offset;
+    let model = |k: f64| f.amplitude * logistic(k, along, f.width) + f.offset;
     let (limit, sign) = (SECOND_EDGE_SHARE * f.amplitude.abs(), f.amplitude.signum());
     let centre = round(along) as i64;
     // Beyond the edge (step > 0) the plateau is `offset + amplitude`: a second edge takes the
@@ -1080,12 +1106,12 @@ pub(crate) fn second_edge(image: &GrayImage, sample: &EdgeSample, half_width: us
 
 /// `sample` fitted again with a second edge in its window: the pixels from `lo` to `hi`
 /// (scanline coordinates) modelled as `d + a L((s − p)/c) + b L((s − q)/c)`, `L` the logistic,
-/// with the width `c` given (the blur's, along the scanline), `a`, `b`, `d` solved linearly for
-/// each pair of edge positions and the near edge `p` and far edge `q` (starting at the sample's
-/// edge and at `far`) by Newton steps on the sum of squares. `None` unless the far edge has the
-/// other sign (the far side of a narrow square, or the background beyond it), lies more than a
-/// width beyond the near edge on its side, the near edge moved by at most a pixel, and the
-/// residual RMS falls below [`TWO_EDGE_GAIN`] times the one-edge fit's.
+/// with the width `c` given (the blur's, along the scanline). The near edge `p` and far edge `q`
+/// start at the sample's edge and at `far`, `a`, `b`, `d` at the levels those imply (a linear
+/// solve); then all five by Gauss–Newton, damped as Levenberg–Marquardt's. `None` unless the far
+/// edge has the other sign (the far side of a narrow square, or the background beyond it), lies
+/// more than a width beyond the near edge on its side, the near edge moved by at most a pixel,
+/// and the residual RMS falls below [`TWO_EDGE_GAIN`] times the one-edge fit's.
 pub(crate) fn refit_two_edges(
     image: &GrayImage,
     sample: &EdgeSample,
@@ -1094,45 +1120,29 @@ pub(crate) fn refit_two_edges(
     far: f64,
     width: f64,
 ) -> Option<EdgeSample> {
-    let (fixed, along) = match sample.axis {
-        Axis::X => (sample.point[1], sample.point[0]),
-        Axis::Y => (sample.point[0], sample.point[1]),
-    };
+    let (fixed, along) = scan_coordinates(sample);
     let len_scan = match sample.axis {
         Axis::X => image.width(),
         Axis::Y => image.height(),
     } as f64;
     let (first, last) = (lo.ceil().max(0.0), hi.floor().min(len_scan - 1.0));
     let n = (last - first + 1.0) as usize;
-    if last <= first || !(MIN_SAMPLES..=MAX_SAMPLES).contains(&n) || width.is_nan() || width <= 0.0
-    {
+    if last <= first || n < MIN_SAMPLES || width.is_nan() || width <= 0.0 {
         return None;
     }
-    let mut y = [0f64; MAX_SAMPLES];
-    for (k, v) in y[..n].iter_mut().enumerate() {
-        let i = first as usize + k;
-        *v = match sample.axis {
-            Axis::X => image.get(i, fixed as usize),
-            Axis::Y => image.get(fixed as usize, i),
-        } as f64;
-    }
-    let y = &y[..n];
-    // Gauss–Newton (Levenberg–Marquardt damped) on `(a, b, d, p, q)`, started at the sample's
-    // edge and `far` with the levels those imply (a linear solve): two logistics per sample and
-    // pass, a 5 × 5 solve.
+    let mut column = [0f32; MAX_SAMPLES];
+    let y = scanline(image, sample.axis, round(fixed), first, n, &mut column)?;
+    // Two logistics per sample and pass, a 5 × 5 solve per step.
     let f = &sample.fit;
     let levels = {
         let mut m = nalgebra::Matrix3::<f64>::zeros();
         let mut r = nalgebra::Vector3::<f64>::zeros();
         for (k, &v) in y.iter().enumerate() {
             let s = first + k as f64;
-            let row = nalgebra::Vector3::new(
-                1.0 / (1.0 + (-(s - along) / width).exp()),
-                1.0 / (1.0 + (-(s - far) / width).exp()),
-                1.0,
-            );
+            let row =
+                nalgebra::Vector3::new(logistic(s, along, width), logistic(s, far, width), 1.0);
             m += row * row.transpose();
-            r += row * v;
+            r += row * v as f64;
         }
         m.try_inverse()? * r
     };
@@ -1142,9 +1152,8 @@ pub(crate) fn refit_two_edges(
             .enumerate()
             .map(|(k, &v)| {
                 let s = first + k as f64;
-                let l1 = 1.0 / (1.0 + (-(s - x[3]) / width).exp());
-                let l2 = 1.0 / (1.0 + (-(s - x[4]) / width).exp());
-                let r = v - (x[0] * l1 + x[1] * l2 + x[2]);
+                let (l1, l2) = (logistic(s, x[3], width), logistic(s, x[4], width));
+                let r = v as f64 - (x[0] * l1 + x[1] * l2 + x[2]);
                 r * r
             })
             .sum()
@@ -1156,9 +1165,8 @@ pub(crate) fn refit_two_edges(
         let mut jtr = nalgebra::SVector::<f64, 5>::zeros();
         for (k, &v) in y.iter().enumerate() {
             let s = first + k as f64;
-            let l1 = 1.0 / (1.0 + (-(s - x[3]) / width).exp());
-            let l2 = 1.0 / (1.0 + (-(s - x[4]) / width).exp());
-            let r = v - (x[0] * l1 + x[1] * l2 + x[2]);
+            let (l1, l2) = (logistic(s, x[3], width), logistic(s, x[4], width));
+            let r = v as f64 - (x[0] * l1 + x[1] * l2 + x[2]);
             let j = nalgebra::SVector::<f64, 5>::from([
                 l1,
                 l2,
