@@ -1415,6 +1415,25 @@ mod tests {
         }
     }
 
+    #[test]
+    fn degenerate_two_edge_windows_give_none() {
+        let img = bar_row(40, 14.3, 20.3, 1.0);
+        let c = logistic_width(1.0);
+        let params = SigmoidParams::default();
+        let s =
+            sample_edge_with(&img, [20.3, 0.0], [0.0, 1.0], 6, Some(c as f32), &params).unwrap();
+        // Too few pixels, an empty or inverted window, a window off the image, no width.
+        assert!(refit_two_edges(&img, &s, 18.0, 22.0, 16.0, c).is_none());
+        assert!(refit_two_edges(&img, &s, 22.0, 18.0, 16.0, c).is_none());
+        assert!(refit_two_edges(&img, &s, 60.0, 80.0, 16.0, c).is_none());
+        assert!(refit_two_edges(&img, &s, 14.0, 26.0, 16.0, 0.0).is_none());
+        assert!(refit_two_edges(&img, &s, 14.0, 26.0, 16.0, f64::NAN).is_none());
+        // A clean edge: nothing for a second edge to explain.
+        let clean = bar_row(40, -50.0, 20.3, 1.0);
+        let s = sample_edge_with(&clean, [20.3, 0.0], [0.0, 1.0], 6, None, &params).unwrap();
+        assert!(refit_two_edges(&clean, &s, 14.0, 26.0, 16.0, c).is_none());
+    }
+
     /// Window length covering about ±5σ_t, at least 25 samples.
     fn window_for(sigma: f64) -> usize {
         let st = (sigma * sigma + 1.0 / 12.0).sqrt();
