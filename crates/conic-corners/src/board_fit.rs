@@ -761,18 +761,30 @@ fn walk_edge(
             if !poor {
                 return s;
             }
-            let (lo, hi) = second_edge(image, &s, hw);
+            // How far beyond the window an edge's blur reaches into it.
+            let reach = (2.0 * cfg.sigma + 1.0).ceil();
+            let (lo, hi) = second_edge(image, &s, hw, reach as usize);
             let (_, along_scan) = scan_coordinates(&s);
             let centre = edge_round(along_scan);
             let (wlo, whi) = (
                 bounds.lo.max(centre - hw as f64),
                 bounds.hi.min(centre + hw as f64),
             );
-            // The nearer departure, if inside the window; the far edge about a pixel beyond.
-            let far = match (lo > wlo, hi < whi) {
-                (true, true) if along_scan - lo <= hi - along_scan => lo - 1.0,
-                (true, true) | (false, true) => hi + 1.0,
-                (true, false) => lo - 1.0,
+            // The nearer departure, if its blur reaches the window (a side cut short by a
+            // crossing edge ends at the cut: what lies beyond is that edge); the far edge about a
+            // pixel beyond it, and the window grown to hold that edge's blur, which pins it down.
+            let (lo_seen, hi_seen) = (
+                if bounds.lo > centre - hw as f64 { wlo } else { wlo - reach },
+                if bounds.hi < centre + hw as f64 { whi } else { whi + reach },
+            );
+            let (far, wlo, whi) = match (lo > lo_seen, hi < hi_seen) {
+                (true, true) if along_scan - lo <= hi - along_scan => {
+                    (lo - 1.0, bounds.lo.max(wlo.min(lo - 1.0 - reach)), whi)
+                }
+                (true, true) | (false, true) => {
+                    (hi + 1.0, wlo, bounds.hi.min(whi.max(hi + 1.0 + reach)))
+                }
+                (true, false) => (lo - 1.0, bounds.lo.max(wlo.min(lo - 1.0 - reach)), whi),
                 (false, false) => return s,
             };
             refit_two_edges(image, &s, wlo, whi, far, fixed as f64).unwrap_or(s)

@@ -1057,16 +1057,24 @@ pub(crate) fn crossing_offset(
     (dir[b].abs() > 1e-9).then(|| point[a] + (fixed - point[b]) * dir[a] / dir[b] - q[a])
 }
 
-/// Where a second edge begins in the profile window of `sample` (`half_width` pixels on either
-/// side of its edge): the scanline coordinate of the first pixel before the edge (`lo`) and
-/// after it (`hi`), walking outwards, that strays from the fitted logistic towards the other
-/// side's level by more than [`SECOND_EDGE_SHARE`] of the contrast, with its next pixel too
-/// (a blurred edge spans several pixels, the noise strays one at a time); `-∞` / `+∞` where
-/// none does. A square a few pixels wide (foreshortened beside a silhouette, or the border
-/// squares of a board that ends at one) puts its far edge or the background beyond it into the
-/// window of its near edge, and the fit, taking it for part of the plateau, moves by tenths of
-/// a pixel, the same way along the whole edge.
-pub(crate) fn second_edge(image: &GrayImage, sample: &EdgeSample, half_width: usize) -> (f64, f64) {
+/// Where a second edge begins in or just beyond the profile window of `sample` (`half_width`
+/// pixels on either side of its edge, searched `reach` pixels farther): the scanline coordinate
+/// of the first pixel before the edge (`lo`) and after it (`hi`), walking outwards, that strays
+/// from the fitted logistic towards the other side's level by more than [`SECOND_EDGE_SHARE`] of
+/// the contrast, with its next pixel too (a blurred edge spans several pixels, the noise strays
+/// one at a time); `-∞` / `+∞` where none does. A square a few pixels wide (foreshortened beside
+/// a silhouette, or the border squares of a board that ends at one) puts its far edge or the
+/// background beyond it into the window of its near edge, and the fit, taking it for part of
+/// the plateau, moves by tenths of a pixel, the same way along the whole edge. The fit bends
+/// its plateau towards an edge whose blur only begins inside the window, so that pixels there
+/// stray little from it: the search goes on past the window, as far as such an edge's blur
+/// reaches into it.
+pub(crate) fn second_edge(
+    image: &GrayImage,
+    sample: &EdgeSample,
+    half_width: usize,
+    reach: usize,
+) -> (f64, f64) {
     let (fixed, along) = scan_coordinates(sample);
     let (len_fixed, len_scan) = match sample.axis {
         Axis::X => (image.height(), image.width()),
@@ -1093,7 +1101,7 @@ pub(crate) fn second_edge(image: &GrayImage, sample: &EdgeSample, half_width: us
     };
     // Two pixels in a row: a blurred edge spans several, the noise strays one at a time.
     let first_off = |step: i64| -> Option<f64> {
-        (1..=half_width as i64).find_map(|k| {
+        (1..=(half_width + reach) as i64).find_map(|k| {
             let i = centre + step * k;
             (strays(i, step)? && strays(i + step, step).unwrap_or(true)).then_some(i as f64)
         })
@@ -1386,7 +1394,7 @@ mod tests {
         let s = sample_edge_with(&clean, [near, 0.0], [0.0, 1.0], hw, None, &params).unwrap();
         assert!((s.point[0] - near).abs() < 0.01, "{:?}", s.point);
         assert_eq!(
-            second_edge(&clean, &s, hw),
+            second_edge(&clean, &s, hw, 0),
             (f64::NEG_INFINITY, f64::INFINITY)
         );
         // Dark squares of 6 and 7 px in a ±6 px window at σ = 1 px: the one-edge fit is pulled
@@ -1397,7 +1405,7 @@ mod tests {
             let fixed = Some(c as f32);
             let s = sample_edge_with(&img, [near, 0.0], [0.0, 1.0], hw, fixed, &params).unwrap();
             let one = s.point[0] - near;
-            let (lo, hi) = second_edge(&img, &s, hw);
+            let (lo, hi) = second_edge(&img, &s, hw, 0);
             assert!(
                 hi.is_infinite() && lo > near - width - 2.0 && lo < near,
                 "{lo} {hi}"
@@ -1413,6 +1421,44 @@ mod tests {
             );
             assert!(two.fit.rms < TWO_EDGE_GAIN * s.fit.rms && two.fit.amplitude > 0.0);
         }
+    }
+
+    #[test]
+    fn a_far_edge_whose_blur_only_begins_in_the_window_is_found_past_it() {
+        // A dark square, then a light border square 5.4 px wide and the grey background beyond
+        // (a board's last column beside a silhouette, as in seed 3000 pair 21 right of the
+        // curved-board benchmark). In the ±5 px window of σ = 0.75 px the one-edge fit bends
+        // its light plateau down to the far edge's first blurred pixel: no pixel inside the
+        // window strays from it, and the edge is pulled towards the dark side.
+        let (sigma, near, width, hw) = (0.75, 20.45, 5.4, 5);
+        let data = (0..40)
+            .map(|i| {
+                let i = i as f64;
+                let light = 0.77 * area_step(i, near, sigma);
+                (0.08 + light - 0.35 * area_step(i, near + width, sigma)) as f32
+            })
+            .collect();
+        let img = GrayImage::from_vec(40, 1, data).unwrap();
+        let params = SigmoidParams::default();
+        let s = sample_edge_with(&img, [near, 0.0], [0.0, 1.0], hw, None, &params).unwrap();
+        let one = s.point[0] - near;
+        assert_eq!(
+            second_edge(&img, &s, hw, 0),
+            (f64::NEG_INFINITY, f64::INFINITY)
+        );
+        let reach = (2.0 * sigma + 1.0).ceil();
+        let (lo, hi) = second_edge(&img, &s, hw, reach as usize);
+        assert!(
+            lo.is_infinite() && hi > near + 3.0 && hi < near + width + 1.0,
+            "{hi}"
+        );
+        // The window grown to hold the far edge's blur, as the board walks do.
+        let (centre, c) = (round(s.point[0]), logistic_width(sigma));
+        let whi = (centre + hw as f64).max(hi + 1.0 + reach);
+        let two = refit_two_edges(&img, &s, centre - hw as f64, whi, hi + 1.0, c).unwrap();
+        let err = two.point[0] - near;
+        // Measured: −0.030 → 0.003 px.
+        assert!(one < -0.025 && err.abs() < 0.005, "{one} -> {err}");
     }
 
     #[test]
