@@ -1140,40 +1140,46 @@ pub(crate) fn refit_two_edges(
     }
     let mut column = [0f32; MAX_SAMPLES];
     let y = scanline(image, sample.axis, round(fixed), first, n, &mut column)?;
-    // Two logistics per sample and pass, a 5 × 5 solve per step.
+    // The two logistics at every sample for the edges `(p, q)`, and the sum of squares they
+    // leave with the levels `x[..3]`: computed once per trial and kept for the next step's
+    // Jacobian (the exponentials are most of the cost).
+    type Logistics = [[f64; 2]; MAX_SAMPLES];
+    let logistics = |p: f64, q: f64, l: &mut Logistics| {
+        for (k, l) in l[..n].iter_mut().enumerate() {
+            let s = first + k as f64;
+            *l = [logistic(s, p, width), logistic(s, q, width)];
+        }
+    };
+    let sse_of = |x: &[f64; 5], l: &Logistics| -> f64 {
+        y.iter()
+            .zip(l)
+            .map(|(&v, l)| {
+                let r = v as f64 - (x[0] * l[0] + x[1] * l[1] + x[2]);
+                r * r
+            })
+            .sum()
+    };
     let f = &sample.fit;
+    let mut l = [[0.0; 2]; MAX_SAMPLES];
+    logistics(along, far, &mut l);
     let levels = {
         let mut m = nalgebra::Matrix3::<f64>::zeros();
         let mut r = nalgebra::Vector3::<f64>::zeros();
-        for (k, &v) in y.iter().enumerate() {
-            let s = first + k as f64;
-            let row =
-                nalgebra::Vector3::new(logistic(s, along, width), logistic(s, far, width), 1.0);
+        for (&v, l) in y.iter().zip(&l) {
+            let row = nalgebra::Vector3::new(l[0], l[1], 1.0);
             m += row * row.transpose();
             r += row * v as f64;
         }
         m.try_inverse()? * r
     };
     let mut x = [levels[0], levels[1], levels[2], along, far];
-    let sse_of = |x: &[f64; 5]| -> f64 {
-        y.iter()
-            .enumerate()
-            .map(|(k, &v)| {
-                let s = first + k as f64;
-                let (l1, l2) = (logistic(s, x[3], width), logistic(s, x[4], width));
-                let r = v as f64 - (x[0] * l1 + x[1] * l2 + x[2]);
-                r * r
-            })
-            .sum()
-    };
-    let mut sse = sse_of(&x);
+    let mut sse = sse_of(&x, &l);
+    let mut trial_l = [[0.0; 2]; MAX_SAMPLES];
     let mut lambda = 1e-3;
     for _ in 0..TWO_EDGE_ITERATIONS {
         let mut jtj = nalgebra::SMatrix::<f64, 5, 5>::zeros();
         let mut jtr = nalgebra::SVector::<f64, 5>::zeros();
-        for (k, &v) in y.iter().enumerate() {
-            let s = first + k as f64;
-            let (l1, l2) = (logistic(s, x[3], width), logistic(s, x[4], width));
+        for (&v, &[l1, l2]) in y.iter().zip(&l) {
             let r = v as f64 - (x[0] * l1 + x[1] * l2 + x[2]);
             let j = nalgebra::SVector::<f64, 5>::from([
                 l1,
@@ -1194,9 +1200,11 @@ pub(crate) fn refit_two_edges(
             }
             if let Some(step) = m.lu().solve(&jtr) {
                 let trial = std::array::from_fn(|i| x[i] + step[i]);
-                let t = sse_of(&trial);
+                logistics(trial[3], trial[4], &mut trial_l);
+                let t = sse_of(&trial, &trial_l);
                 if t < sse {
                     (x, sse) = (trial, t);
+                    std::mem::swap(&mut l, &mut trial_l);
                     taken = Some(step[3].abs().max(step[4].abs()));
                     lambda = (lambda * 0.3).max(1e-9);
                     break;
