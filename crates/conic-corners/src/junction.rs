@@ -188,6 +188,9 @@ pub struct JunctionCorner {
 const NP: usize = 13;
 /// Number of nonlinear parameters.
 const NL: usize = 9;
+
+/// Index of the sliver's offset among the parameters.
+const SLIVER_OFFSET: usize = 8;
 type Normal = SMatrix<f64, NP, NP>;
 type Vector = SVector<f64, NP>;
 
@@ -705,6 +708,21 @@ impl Window {
     /// evaluated lane by lane, and each sum keeps one partial sum per lane.
     #[inline(always)]
     fn normal_equations_generic(&self, p: &Vector) -> Option<(Normal, Vector, f64)> {
+        if self.sliver.is_some() {
+            self.normal_equations_lanes::<true>(p)
+        } else {
+            self.normal_equations_lanes::<false>(p)
+        }
+    }
+
+    /// [`Window::normal_equations_generic`] with or without a sliver: without one, the
+    /// sliver's offset (parameter 8) has no derivative, and its row and column of `JᵀJ`, a
+    /// seventh of the sums, are not summed.
+    #[inline(always)]
+    fn normal_equations_lanes<const SLIVER: bool>(
+        &self,
+        p: &Vector,
+    ) -> Option<(Normal, Vector, f64)> {
         let g = Geometry::new(p, self.sliver)?;
         let (c0, gx, gy, a) = (p[NL], p[NL + 1], p[NL + 2], p[NL + 3]);
         let mut jtj_lanes = [[0.0; PX]; NP * (NP + 1) / 2];
@@ -738,8 +756,10 @@ impl Window {
             let mut idx = 0;
             for row in 0..NP {
                 for col in 0..row + 1 {
-                    for l in 0..PX {
-                        jtj_lanes[idx][l] += jac[row][l] * jac[col][l];
+                    if SLIVER || (row != SLIVER_OFFSET && col != SLIVER_OFFSET) {
+                        for l in 0..PX {
+                            jtj_lanes[idx][l] += jac[row][l] * jac[col][l];
+                        }
                     }
                     idx += 1;
                 }
@@ -756,9 +776,9 @@ impl Window {
         }
         let jtr = Vector::from_fn(|k, _| total(&jtr_lanes[k]));
         let cost = total(&cost_lanes);
-        if self.sliver.is_none() {
+        if !SLIVER {
             // No sliver: its offset stays where it is.
-            jtj[(8, 8)] = 1.0;
+            jtj[(SLIVER_OFFSET, SLIVER_OFFSET)] = 1.0;
         }
         (cost.is_finite() && jtj.iter().all(|v| v.is_finite()) && jtr.iter().all(|v| v.is_finite()))
             .then_some((jtj, jtr, cost))
