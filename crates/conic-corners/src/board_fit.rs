@@ -805,8 +805,7 @@ fn walk_edge(
             };
             // A departure this near lies within the edge's own blur, where the model cannot
             // part two edges: on the curved-board benchmark's 160 views and the eight curved
-            // photos none of 357 such refits was kept (and they were 55 % of the refits' cost
-            // on `curve_6.jpg`).
+            // photos none of 359 such refits was kept (85 of the 138 refits on `curve_6.jpg`).
             if (far - along_scan).abs() - 1.0 < cfg.sigma + 1.5 {
                 return s;
             }
