@@ -380,9 +380,9 @@ fn real_photos_when_present() {
     let expected = [
         ("curve_4.jpg", 110),
         ("curve_5.jpg", 101),
-        ("curve_6.jpg", 106),
-        ("curve_7.jpg", 101),
-        ("curve_8.jpg", 102),
+        ("curve_6.jpg", 107),
+        ("curve_7.jpg", 103),
+        ("curve_8.jpg", 103),
         ("marker_real.jpg", 94),
         ("marker_real2.jpg", 121),
         ("marker_real3.jpg", 87),
