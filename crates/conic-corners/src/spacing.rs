@@ -30,7 +30,8 @@
 //! fits (two degrees of freedom) is below [`SpacingParams::family_chi2`]; a single prediction is
 //! skipped where its own fit's χ² is above [`SpacingParams::fit_chi2`] (an outlier among the
 //! six) or where it disagrees with the corner by more than [`SpacingParams::gate`] (χ² of one
-//! degree of freedom).
+//! degree of freedom). A corner less sure than [`SpacingParams::max_sigma`] is fused only where
+//! its run holds sure corners on both sides of it (the law interpolates).
 //!
 //! Measured on the curved-board benchmark's renders (`board-accuracy --pairs 12`, board mode,
 //! against the same run without it): RMSE flattest curvature bin 0.0060 → 0.0052 px, top bin
@@ -73,13 +74,15 @@ pub struct SpacingParams {
     pub gate: f64,
     /// The laws' model error σ_m (px) added to every prediction's variance.
     pub model_sigma: f64,
-    /// A corner is one of the six a law is fitted to, and is fused with its law's prediction,
-    /// only if its σ along the chord is at most this (px). Larger σ come from curves that meet
-    /// at a glancing angle or from fallbacks, where the covariance, a linearisation, is no
-    /// guide to the error: next to a cylinder's silhouette such a law, extrapolated one square,
-    /// moved a corner 2.7 px; and a corner that claims σ 1.9 px (0.55 px off, beside the slivers
-    /// of a 60 mm cylinder) was moved 1.87 px off by a law extrapolated over the sliver corners
-    /// beside it, which are no better placed than it.
+    /// A corner is one of the six a law is fitted to only if its σ along the chord is at most
+    /// this (px), and it is fused with an extrapolated law's prediction (no run corner beyond
+    /// it) only if so. Larger σ come from curves that meet at a glancing angle or from
+    /// fallbacks, where the covariance, a linearisation, is no guide to the error: next to a
+    /// cylinder's silhouette such a law, extrapolated one square, moved a corner 2.7 px; and a
+    /// corner that claims σ 1.9 px (0.55 px off, beside the slivers of a 60 mm cylinder) was
+    /// moved 1.87 px off by a law extrapolated over the sliver corners beside it, which are no
+    /// better placed than it. Between sure corners the law holds whatever the corner claims
+    /// (the curved-board benchmark's seed 3000, pair 17 left, (3, 0): σ 0.11 px, 0.07 px off).
     pub max_sigma: f64,
 }
 
@@ -238,6 +241,8 @@ struct Prediction {
     variance: f64,
     /// χ² of the law's fit to the six others.
     chi2: f64,
+    /// Whether the run holds corners on both sides of this one (the law interpolates).
+    inside: bool,
 }
 
 /// The predictions along one family of lines (`step` from a corner to the next on its line):
@@ -301,6 +306,7 @@ fn family(
                 value: value + offset,
                 variance: variance + params.model_sigma * params.model_sigma,
                 chi2: fit.chi2,
+                inside: u0.abs() < half as f64,
             });
         }
     }
@@ -342,7 +348,7 @@ pub fn fuse_along_lines(corners: &mut [DetectedCorner], params: &SpacingParams) 
         let innovation = p.value - own;
         if v.is_nan()
             || v <= 0.0
-            || v > params.max_sigma * params.max_sigma
+            || (v > params.max_sigma * params.max_sigma && !p.inside)
             || innovation * innovation > params.gate * (v + p.variance)
         {
             continue;
@@ -451,6 +457,43 @@ mod tests {
         // The fused σ across the column is honest: about 68 % of the errors within it.
         let share = within as f64 / count as f64;
         assert!((0.55..0.85).contains(&share), "{share}");
+    }
+
+    #[test]
+    fn an_unsure_corner_takes_the_law_between_its_neighbours_but_not_beyond_them() {
+        // A 7 × 9 grid (the curved-board benchmark's boards). Two corners claim σ 0.15 px and
+        // are 0.3 px off along their columns: (3, 0) has three sure corners on either side along
+        // its column, (6, 8) is the end of its column and of its row.
+        let exact = grid(7, 9, 0.0, 0.003, 0);
+        let mut corners = exact.clone();
+        let at = |r, c| exact.iter().position(|k| (k.row, k.col) == (r, c)).unwrap();
+        let (inside, end) = (at(3, 0), at(6, 8));
+        for &k in &[inside, end] {
+            corners[k].y += 0.3;
+            corners[k].cov = Some([[0.0225, 0.0], [0.0, 0.0225]]);
+            corners[k].sigma = Some(0.15);
+        }
+        fuse_along_lines(&mut corners, &SpacingParams::default());
+        // The column's direction at (3, 0).
+        let (a, b) = (&exact[at(2, 0)], &exact[at(4, 0)]);
+        let t = {
+            let (dx, dy) = (b.x - a.x, b.y - a.y);
+            let n = dx.hypot(dy);
+            [dx / n, dy / n]
+        };
+        let offset =
+            |k: usize| t[0] * (corners[k].x - exact[k].x) + t[1] * (corners[k].y - exact[k].y);
+        // The law of its six sure neighbours places the inner one along its column (0.29 px of
+        // the 0.3 px offset lie along it; the row, ending at it, is not used), and its variance
+        // along the column says so.
+        assert!(offset(inside).abs() < 0.005, "{}", offset(inside));
+        let cov = corners[inside].cov.unwrap();
+        assert!(along(&cov, t) < 0.01 * 0.01, "{cov:?}");
+        // A law extrapolated past the last sure corner knows no better than the corner itself.
+        assert_eq!(
+            (corners[end].x, corners[end].y),
+            (exact[end].x, exact[end].y + 0.3)
+        );
     }
 
     #[test]
