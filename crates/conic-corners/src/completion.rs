@@ -1309,6 +1309,16 @@ fn complete_one(
                     })
                 };
                 let junction_confirms = |z: P| junction_at(z).is_some();
+                // The site's answer: a corner at `z` along the grid steps.
+                let found = |z: P, score: f64| -> Verified {
+                    let corner = Corner {
+                        x: z[0],
+                        y: z[1],
+                        angles: [angle(u), angle(v)],
+                        score,
+                    };
+                    (t, corner, (u, v))
+                };
                 let hairline_site = || -> Option<Verified> {
                     // A boundary line of the board whose squares beyond are hairline slivers:
                     // the corner is where the line's polarity flips (see [`hairline`]). At a
@@ -1364,13 +1374,7 @@ fn complete_one(
                     if norm(sub(z, p)) > params.max_offset * step || !placed() {
                         return None;
                     }
-                    let corner = Corner {
-                        x: z[0],
-                        y: z[1],
-                        angles: [angle(u), angle(v)],
-                        score,
-                    };
-                    Some((t, corner, (u, v)))
+                    Some(found(z, score))
                 };
                 let regular = || -> Option<Verified> {
                     let (q, score, narrow) = verified?;
@@ -1445,13 +1449,7 @@ fn complete_one(
                     if grows && !narrow && status != Status::Converged && !junction_confirms(z) {
                         return None;
                     }
-                    let corner = Corner {
-                        x: z[0],
-                        y: z[1],
-                        angles: [angle(u), angle(v)],
-                        score,
-                    };
-                    Some((t, corner, (u, v)))
+                    Some(found(z, score))
                 };
                 if hairline_only {
                     hairline_site()
