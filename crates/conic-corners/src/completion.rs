@@ -128,10 +128,10 @@ use std::sync::OnceLock;
 /// Tuning of [`complete_boards`]; lengths in grid steps (the local square side).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CompletionParams {
-    /// Rounds of prediction and verification (0 disables completion; default 12). A round
-    /// that adds nothing ends the completion, so more rounds cost only where corners are still
-    /// being found: a column of hairline slivers ([`hairline`]) grows by one corner a round,
-    /// as each prediction needs the corner before it.
+    /// Rounds of prediction and verification (0 disables completion; default 3). After them,
+    /// up to [`HAIRLINE_ROUNDS`] more check only hairline slivers ([`hairline`]): a line of
+    /// them grows by one corner a round, as each prediction needs the corner before it. A round
+    /// that adds nothing ends either kind.
     pub rounds: usize,
     /// Largest distance of a prediction from the median prediction (default 0.15).
     pub agreement: f64,
