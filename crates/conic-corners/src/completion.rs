@@ -68,8 +68,10 @@
 //!    the corner, if it stays within 1.5 px of it. Where all of this fails at a site on a row or
 //!    column the board already holds, the squares beyond may be hairline slivers of a pixel or
 //!    two, too narrow for any frame; the boundary line's polarity flips at such a junction
-//!    ([`hairline`]), and where it does, the junction is placed where the line meets the grid
-//!    line into the board.
+//!    (dark inner square: light beyond; light inner square: the dark sliver beyond), and where
+//!    it does along one straight line, the junction is placed where that line meets the grid
+//!    line into the board, if a refiner started there comes back to it. After the rounds, such
+//!    a line goes on growing by one corner a round.
 //!    A site whose full frame leaves the image (a board cut by the image's border) is retried
 //!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way. Nearer the
 //!    border than that (on large squares a quarter frame spans 20 px and more), a corner that
@@ -129,7 +131,7 @@ use std::sync::OnceLock;
 #[derive(Clone, Debug, PartialEq)]
 pub struct CompletionParams {
     /// Rounds of prediction and verification (0 disables completion; default 3). After them,
-    /// up to [`HAIRLINE_ROUNDS`] more check only hairline slivers ([`hairline`]): a line of
+    /// up to 32 more check only hairline slivers (see the module docs): a line of
     /// them grows by one corner a round, as each prediction needs the corner before it. A round
     /// that adds nothing ends either kind.
     pub rounds: usize,
