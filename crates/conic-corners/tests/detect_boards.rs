@@ -7,6 +7,7 @@
 //! a truth corner, the labels of each board are the truth labels up to one lattice symmetry and a
 //! shift (so truth neighbours differ by ±1 on one axis), and the refined positions' RMS error.
 
+use conic_corners::board_fit::Path;
 use conic_corners::detect::{detect, Board, DetectParams, DetectedCorner, Detection};
 use conic_corners::prefilter::box_downsample;
 use conic_corners::refine::Status;
@@ -1513,6 +1514,95 @@ fn robustness_report() {
             }
             let rms = (sq / found.max(1) as f64).sqrt();
             println!("| {condition} | {name} | {visible} | {found} | {off} | {none} | {rms:.4} |");
+        }
+    }
+}
+
+/// How honest each detected corner's σ is beyond the robustness report's conditions, at strong
+/// bends (a table, not a pass/fail test): `cargo test --release -p conic-corners --test
+/// detect_boards honesty_report -- --ignored --nocapture`. Five random poses per cell (seeds
+/// 500–504), 9 × 9 corners on 20 mm squares unless the condition says otherwise, blur 1 px, noise
+/// 1 %. "Found", "off" and the RMS as in `robustness_report`; "wrong σ" counts detections more
+/// than 0.3 px and more than 3σ from every true corner, by the path that placed them (b board,
+/// l local, j junction, g gradient).
+#[test]
+#[ignore]
+fn honesty_report() {
+    type Edit = fn(&mut BoardScene);
+    let conditions: [(&str, Edit); 11] = [
+        ("inverted polarity", |t| {
+            (t.black, t.white, t.background) = (0.85, 0.1, 0.5)
+        }),
+        ("no margin", |t| t.margin_mm = 0.0),
+        ("dark background", |t| t.background = 0.03),
+        ("white background", |t| t.background = 0.95),
+        ("blur 3 px, noise 5 %", |t| (t.blur, t.noise) = (3.0, 0.05)),
+        ("4×6 corners", |t| (t.rows, t.cols) = (4, 6)),
+        ("2×3 corners", |t| (t.rows, t.cols) = (2, 3)),
+        ("7×10 corners", |t| (t.rows, t.cols) = (7, 10)),
+        ("640×480", |t| t.camera = vga()),
+        ("640×480, 6×8 corners, blur 2 px", |t| {
+            t.camera = vga();
+            (t.rows, t.cols, t.blur) = (6, 8, 2.0);
+        }),
+        ("barrel distortion k₁ 0.3", |t| t.camera.k1 = 0.3),
+    ];
+    let surfaces = [
+        ("flat", Surface::Flat),
+        ("cylinder 45", Surface::Cylinder { radius_mm: 45.0 }),
+        (
+            "column 60×35",
+            Surface::EllipticColumn {
+                a_mm: 60.0,
+                b_mm: 35.0,
+            },
+        ),
+        ("S 80", Surface::SShape { radius_mm: 80.0 }),
+    ];
+    println!("| condition | surface | visible | found | off | RMS px | wrong σ (b, l, j, g) |");
+    println!("|---|---|---|---|---|---|---|");
+    for (condition, edit) in conditions {
+        for (name, surface) in surfaces {
+            let (mut visible, mut found, mut off, mut sq) = (0, 0, 0, 0.0);
+            let mut wrong = [0usize; 4];
+            for seed in 0..5u64 {
+                let mut t = template();
+                edit(&mut t);
+                let s = random_board_scene(&mut ChaCha8Rng::seed_from_u64(500 + seed), surface, &t);
+                let r = s.render(seed).expect("valid scene");
+                let det = detect(&r.image, &DetectParams::default());
+                visible += r.corners.iter().filter(|t| t.visible).count();
+                let nearest = |x: f64, y: f64, visible_only: bool| {
+                    r.corners
+                        .iter()
+                        .filter(|t| t.x.is_finite() && (t.visible || !visible_only))
+                        .map(|t| (t.x - x).hypot(t.y - y))
+                        .fold(f64::INFINITY, f64::min)
+                };
+                for c in det.boards.iter().flat_map(|b| &b.corners) {
+                    let any = nearest(c.x, c.y, false);
+                    off += usize::from(any > 1.5);
+                    if any > 0.3 && any > 3.0 * c.sigma.unwrap_or(0.0) {
+                        wrong[match c.path {
+                            Path::Board => 0,
+                            Path::Local => 1,
+                            Path::Junction => 2,
+                            Path::Gradient => 3,
+                        }] += 1;
+                    }
+                    let d = nearest(c.x, c.y, true);
+                    if d <= 1.5 {
+                        found += 1;
+                        sq += d * d;
+                    }
+                }
+            }
+            let rms = (sq / found.max(1) as f64).sqrt();
+            let [b, l, j, g] = wrong;
+            println!(
+                "| {condition} | {name} | {visible} | {found} | {off} | {rms:.4} | {} ({b}, {l}, {j}, {g}) |",
+                b + l + j + g
+            );
         }
     }
 }
