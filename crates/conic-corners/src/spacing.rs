@@ -5,7 +5,7 @@
 //! board bent round a cylinder, an elliptic column or an S), the print's corners are evenly
 //! spaced, and their images follow a smooth law in the corner's index `u`: a 1-D homography
 //! `(a + b u) / (1 + c u)` for a pinhole camera, bent a little by lens distortion. Two laws of
-//! four parameters cover that ([`Law::Cubic`], the distortion's shape, and [`Law::Homography`],
+//! four parameters cover that (`Law::Cubic`, the distortion's shape, and `Law::Homography`,
 //! `(a + b u + e u²) / (1 + c u)`, strong perspective over large squares). A corner's position
 //! along the line is set by the *crossing* curve through it, a different edge for every corner,
 //! so its neighbours' positions are independent evidence about it: where the crossing curve is

@@ -9,7 +9,7 @@
 //! through it, a different edge for every corner, and the positions of consecutive corners follow a
 //! smooth law (a 1-D homography for a straight line in space, bent a little by lens distortion).
 //! So, as a least-squares adjustment estimates its variance of unit weight from its redundancy,
-//! [`variance_factor`] fits such a law ([`run_chi2`]) to the along-line positions of every run of
+//! [`variance_factor`] fits such a law (`run_chi2`) to the along-line positions of every run of
 //! six consecutive corners on a straight stretch of a row or a column, weighted by the corners'
 //! along-line variances, and takes the median of the fits' χ² (two degrees of freedom for six
 //! corners) over its median for honest covariances, `2 ln 2`. Each corner's covariance is then
@@ -101,7 +101,7 @@ fn run_chi2(p: &[[f64; 2]; RUN], c: &[Cov; RUN], straightness: f64) -> Option<f6
 }
 
 /// The a-posteriori variance factor of `corners` (one board, labelled): the median χ² of the
-/// weighted fits ([`run_chi2`]) to the along-line positions of every straight run of six consecutive
+/// weighted fits (`run_chi2`) to the along-line positions of every straight run of six consecutive
 /// corners on a row or a column (all with a covariance), over `2 ln 2`, its median for honest
 /// covariances. `None` with fewer than `params.min_windows` runs (a small or strongly bent board)
 /// or a zero median (exact synthetic positions).
