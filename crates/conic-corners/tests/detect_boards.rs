@@ -1419,6 +1419,16 @@ fn bar_pose(what: &str, surface: Surface, seed: u64) {
     assert!(o.rms < RMS_BOUND, "{}", o.rms);
 }
 
+/// Distance (px) from `(x, y)` to the nearest true corner (only the visible ones if
+/// `visible_only`); infinite if there is none.
+fn nearest_truth(truth: &[BoardCorner], x: f64, y: f64, visible_only: bool) -> f64 {
+    truth
+        .iter()
+        .filter(|t| t.x.is_finite() && (t.visible || !visible_only))
+        .map(|t| (t.x - x).hypot(t.y - y))
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Detection across imaging conditions, as a table (not a pass/fail test):
 /// `cargo test --release -p conic-corners --test detect_boards robustness_report -- --ignored
 /// --nocapture`. Six random poses per cell, 9×9 corners on 20 mm squares (about 90–140 px)
@@ -1495,13 +1505,7 @@ fn robustness_report() {
                 let r = s.render(seed).expect("valid scene");
                 let det = detect(&degrade(r.image), &DetectParams::default());
                 none += usize::from(det.boards.is_empty());
-                let nearest = |x: f64, y: f64, visible_only: bool| {
-                    r.corners
-                        .iter()
-                        .filter(|t| t.x.is_finite() && (t.visible || !visible_only))
-                        .map(|t| (t.x - x).hypot(t.y - y))
-                        .fold(f64::INFINITY, f64::min)
-                };
+                let nearest = |x, y, visible_only| nearest_truth(&r.corners, x, y, visible_only);
                 visible += r.corners.iter().filter(|t| t.visible).count();
                 for c in det.boards.iter().flat_map(|b| &b.corners) {
                     off += usize::from(nearest(c.x, c.y, false) > 1.5);
@@ -1572,13 +1576,7 @@ fn honesty_report() {
                 let r = s.render(seed).expect("valid scene");
                 let det = detect(&r.image, &DetectParams::default());
                 visible += r.corners.iter().filter(|t| t.visible).count();
-                let nearest = |x: f64, y: f64, visible_only: bool| {
-                    r.corners
-                        .iter()
-                        .filter(|t| t.x.is_finite() && (t.visible || !visible_only))
-                        .map(|t| (t.x - x).hypot(t.y - y))
-                        .fold(f64::INFINITY, f64::min)
-                };
+                let nearest = |x, y, visible_only| nearest_truth(&r.corners, x, y, visible_only);
                 for c in det.boards.iter().flat_map(|b| &b.corners) {
                     let any = nearest(c.x, c.y, false);
                     off += usize::from(any > 1.5);
