@@ -119,7 +119,7 @@ use crate::connectivity::{board_from, line_diff, Board, ConnectivityParams};
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
-use crate::quadratic_form::fit_line_tls;
+use crate::quadratic_form::{fit_line_tls, intersect_lines};
 use crate::refine::{refine_one_among, RefineParams, Status};
 use crate::segmentation::median_in_place;
 use crate::GrayImage;
@@ -993,13 +993,7 @@ fn hairline(
     if !(rms <= HAIRLINE_RMS && cos >= HAIRLINE_ANGLE_DEG.to_radians().cos()) {
         return None;
     }
-    let ([a1, b1, c1], [a2, b2, c2]) = (line.coefficients(), row.coefficients());
-    let det = a1 * b2 - a2 * b1;
-    if det.abs() < 1e-6 {
-        return None;
-    }
-    let z = [(b1 * c2 - b2 * c1) / det, (a2 * c1 - a1 * c2) / det];
-    Some((z, score))
+    Some((intersect_lines(&line, &row)?, score))
 }
 
 /// What the junction at a site must show: the checker's phase there (±1, the sign of its

@@ -12,7 +12,7 @@ use crate::connectivity::{
     Graph, LabelParams,
 };
 use crate::election::{elect_scales, Corner, ElectionParams};
-use crate::gradient::{refine_gradient, GradientParams};
+use crate::gradient::{self, refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
 use crate::pattern::{to_pattern, Pattern};
 use crate::prefilter::{prefilter_scales, PrefilterParams, Scales};
@@ -773,7 +773,7 @@ fn sure_far(
 
 /// `c` placed by the gradient estimate started from its position, if that converges. Its σ is
 /// widened by the estimate's dependence on its window: the same estimate with a window
-/// [`WINDOW_CHECK`] times wider lands `d` px away (or fails within `max_shift`, then `d` is
+/// [`WINDOW_CHECK`] times wider (up to the largest valid window) lands `d` px away (or fails within `max_shift`, then `d` is
 /// `max_shift`), and the covariance gains `d² I`. On an ideal X-junction the answer does not
 /// depend on the window (every gradient is orthogonal to its ray through the junction); edges
 /// of other junctions within it (narrow squares beside a silhouette, slivers merged by blur)
@@ -785,9 +785,11 @@ fn gradient_corner(
     params: &GradientParams,
 ) -> Option<DetectedCorner> {
     let g = refine_gradient(image, [c.x, c.y], params)?;
+    // Within the parameters' valid ranges, so that a large window of the caller's is not
+    // taken for a failed check.
     let wider = GradientParams {
-        radius: (params.radius as f64 * WINDOW_CHECK).ceil() as usize,
-        window_sigma: params.window_sigma * WINDOW_CHECK,
+        radius: ((params.radius as f64 * WINDOW_CHECK).ceil() as usize).min(gradient::MAX_RADIUS),
+        window_sigma: (params.window_sigma * WINDOW_CHECK).min(gradient::MAX_WINDOW_SIGMA),
         ..params.clone()
     };
     let spread = refine_gradient(image, [c.x, c.y], &wider).map_or(params.max_shift, |w| {

@@ -64,14 +64,14 @@ impl Default for GradientParams {
 impl GradientParams {
     /// Checks the parameters; the message names the offending one.
     pub fn validate(&self) -> Result<(), String> {
-        if !(1..=32).contains(&self.radius) {
+        if !(1..=MAX_RADIUS).contains(&self.radius) {
             return Err(format!(
-                "the gradient window radius must be in 1..=32 px, got {}",
+                "the gradient window radius must be in 1..={MAX_RADIUS} px, got {}",
                 self.radius
             ));
         }
         for (name, v, lo, hi) in [
-            ("window sigma", self.window_sigma, 0.1, 64.0),
+            ("window sigma", self.window_sigma, 0.1, MAX_WINDOW_SIGMA),
             ("smoothing", self.smoothing, 0.0, 8.0),
             ("maximum shift", self.max_shift, 0.0, 1e6),
         ] {
@@ -84,6 +84,11 @@ impl GradientParams {
         Ok(())
     }
 }
+
+/// Largest [`GradientParams::radius`] (px).
+pub(crate) const MAX_RADIUS: usize = 32;
+/// Largest [`GradientParams::window_sigma`] (px).
+pub(crate) const MAX_WINDOW_SIGMA: f64 = 64.0;
 
 /// Movement (px) of the estimate below which the iteration stops.
 const SETTLED_PX: f64 = 1e-3;
