@@ -638,12 +638,14 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
         if let (RefineMode::Board, Some(sp)) = (params.mode, &params.spacing) {
             spacing::fuse_along_lines(&mut board.corners, sp);
         }
-        // Only now: an absolute term, not to be scaled by the variance factor, and the spacing
-        // fusion does better with the claims of the fits (a disputed corner's wider σ let the
-        // spacing law pull it off: cylinder cell of the robustness report 0.0106 → 0.0113 px).
+        // Only now: the spacing fusion does better with the claims of the fits (a disputed
+        // corner's wider σ let the spacing law pull it off: cylinder cell of the robustness
+        // report 0.0106 → 0.0113 px). Scaled like the rest, so that every covariance the board
+        // reports is its `sigma_scale`² times what the board's answers gave.
+        let scale = board.sigma_scale.unwrap_or(1.0);
         for (c, d) in board.corners.iter_mut().zip(&disputes) {
             if let Some(d) = d {
-                disputed(c, *d);
+                disputed(c, d.map(|v| scale * v));
             }
         }
         // What is left of a board after dropping must still be one (`labels.min_corners`).
