@@ -445,164 +445,161 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                         _ => (c, None),
                     };
                 }
-                let placed = (|| {
-                    let neighbours = neighbour_points(&corners, &graph, b, i);
-                    let mut local =
-                        refine_corner(image, &corners[i], row, col, &neighbours, &params.refine);
-                    // The refiner failed at the pixel-level position, which can be off the junction
-                    // (a pen stroke through it moves the election's maximum): it gets two more
-                    // starts, where the board's curves meet (when that was too far from the pixel
-                    // position to be taken) and where the corner's neighbours put it. Only a
-                    // converged answer that confirms its start (within the board fit's `max_shift`)
-                    // counts: one farther off has found another junction. An answer from one side
-                    // of the junction gets the first start: a print's dot gain bridges a junction,
-                    // and its maximum can sit at one tip, 2 px from where the curves meet.
-                    let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
-                    if local.status == Status::Failed
-                        || (local.status == Status::Fallback && too_far.is_some())
+                let neighbours = neighbour_points(&corners, &graph, b, i);
+                let mut local =
+                    refine_corner(image, &corners[i], row, col, &neighbours, &params.refine);
+                // The refiner failed at the pixel-level position, which can be off the junction
+                // (a pen stroke through it moves the election's maximum): it gets two more
+                // starts, where the board's curves meet (when that was too far from the pixel
+                // position to be taken) and where the corner's neighbours put it. Only a
+                // converged answer that confirms its start (within the board fit's `max_shift`)
+                // counts: one farther off has found another junction. An answer from one side
+                // of the junction gets the first start: a print's dot gain bridges a junction,
+                // and its maximum can sit at one tip, 2 px from where the curves meet.
+                let too_far = fitted.as_ref().and_then(|f| f[k].too_far);
+                if local.status == Status::Failed
+                    || (local.status == Status::Fallback && too_far.is_some())
+                {
+                    let predicted = (local.status == Status::Failed)
+                        .then(|| neighbour_prediction(&corners, b, (row, col)))
+                        .flatten();
+                    let mut starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
+                    let confirmed = starts.find_map(|[x, y]| {
+                        let start = Corner { x, y, ..corners[i] };
+                        let again =
+                            refine_corner(image, &start, row, col, &neighbours, &params.refine);
+                        (again.status == Status::Converged
+                            && (again.x - x).hypot(again.y - y) <= params.board_fit.max_shift
+                            && nearest_is_own(&corners, b, i, [again.x, again.y]))
+                        .then_some(again)
+                    });
+                    local = confirmed.unwrap_or(local);
+                }
+                // A local answer from one side of its junction cannot see the offset between the
+                // polarities that a print's dot gain puts into every edge, and is off by about
+                // half of it: its σ says so before it is weighed against the other estimates.
+                if local.status == Status::Fallback {
+                    widen(&mut local, half_offset);
+                }
+                // A doubtful board-wide answer means short, extrapolated curves, where the
+                // local refiner's one-sided answer is no better; failing the gradient
+                // estimate, the board-wide answer stands.
+                let (weak, last) = match (local.status, board) {
+                    (Status::Converged, Some(board))
+                        if board.sigma.unwrap_or(f64::INFINITY)
+                            <= local.sigma.unwrap_or(f64::INFINITY) =>
                     {
-                        let predicted = (local.status == Status::Failed)
-                            .then(|| neighbour_prediction(&corners, b, (row, col)))
-                            .flatten();
-                        let mut starts = too_far.map(|(p, _)| p).into_iter().chain(predicted);
-                        let confirmed = starts.find_map(|[x, y]| {
-                            let start = Corner { x, y, ..corners[i] };
-                            let again =
-                                refine_corner(image, &start, row, col, &neighbours, &params.refine);
-                            (again.status == Status::Converged
-                                && (again.x - x).hypot(again.y - y) <= params.board_fit.max_shift
-                                && nearest_is_own(&corners, b, i, [again.x, again.y]))
-                            .then_some(again)
-                        });
-                        local = confirmed.unwrap_or(local);
+                        (false, board)
                     }
-                    // A local answer from one side of its junction cannot see the offset between the
-                    // polarities that a print's dot gain puts into every edge, and is off by about
-                    // half of it: its σ says so before it is weighed against the other estimates.
-                    if local.status == Status::Fallback {
-                        widen(&mut local, half_offset);
-                    }
-                    // A doubtful board-wide answer means short, extrapolated curves, where the
-                    // local refiner's one-sided answer is no better; failing the gradient
-                    // estimate, the board-wide answer stands.
-                    let (weak, last) = match (local.status, board) {
-                        (Status::Converged, Some(board))
-                            if board.sigma.unwrap_or(f64::INFINITY)
-                                <= local.sigma.unwrap_or(f64::INFINITY) =>
-                        {
-                            (false, board)
-                        }
-                        (Status::Converged, _) => (false, local),
-                        (Status::Fallback, Some(board)) => (true, board),
-                        (Status::Fallback, None) => (true, local),
-                        (Status::Failed, board) => (true, board.unwrap_or(local)),
-                    };
-                    // When nothing else places the corner, the curves' intersection beats the
-                    // unrefined pixel position, if within the refiner's reach of it.
-                    let curves = |c: DetectedCorner| match too_far {
-                        Some(([x, y], cov))
-                            if c.status == Status::Failed
-                                && (x - pixel.x).hypot(y - pixel.y) <= params.refine.max_shift =>
-                        {
-                            DetectedCorner {
-                                x,
-                                y,
-                                status: Status::Fallback,
-                                path: Path::Board,
-                                sigma: Some(worst_sigma(cov)),
-                                cov: Some(cov),
-                                ..c
-                            }
-                        }
-                        _ => c,
-                    };
-                    // The junction model where the walks failed or saw one side only; a one-sided
-                    // local answer with no board answer stays if it claims the smaller σ.
-                    if let Some(j) = junction.as_ref().filter(|_| weak) {
-                        if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
-                            // A board answer (doubtful, but often sure of one direction: the curve
-                            // that is not extrapolated) that agrees is combined with it.
-                            if let Some(f) = board.and_then(|bc| fuse(bc, jc)) {
-                                return f;
-                            }
-                            let one_sided = last.status == Status::Fallback && board.is_none();
-                            return if one_sided && sigma_of(&last) <= sigma_of(&jc) {
-                                last
-                            } else {
-                                jc
-                            };
+                    (Status::Converged, _) => (false, local),
+                    (Status::Fallback, Some(board)) => (true, board),
+                    (Status::Fallback, None) => (true, local),
+                    (Status::Failed, board) => (true, board.unwrap_or(local)),
+                };
+                // When nothing else places the corner, the curves' intersection beats the
+                // unrefined pixel position, if within the refiner's reach of it.
+                let curves = |c: DetectedCorner| match too_far {
+                    Some(([x, y], cov))
+                        if c.status == Status::Failed
+                            && (x - pixel.x).hypot(y - pixel.y) <= params.refine.max_shift =>
+                    {
+                        DetectedCorner {
+                            x,
+                            y,
+                            status: Status::Fallback,
+                            path: Path::Board,
+                            sigma: Some(worst_sigma(cov)),
+                            cov: Some(cov),
+                            ..c
                         }
                     }
-                    // On the board's boundary (a labelled neighbour missing) a converged answer whose
-                    // σ is above the board's limit is doubtful too (the walks beyond the corner are
-                    // short or absent, the curves extrapolated): the junction model's answer replaces
-                    // it if it claims the smaller σ. Not inside the board: at an S's inflection the
-                    // model (one curvature per edge) is biased by 0.02–0.03 px where the local
-                    // refiner is not.
-                    let boundary = || {
-                        [(0, 1), (0, -1), (1, 0), (-1, 0)]
-                            .iter()
-                            .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)))
-                    };
-                    let doubtful =
-                        !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
-                    if let Some(j) = junction.as_ref().filter(|_| doubtful) {
-                        if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
-                            if let Some(f) = board.and_then(|bc| fuse(bc, jc)) {
-                                return f;
-                            }
-                            if sigma_of(&jc) < sigma_of(&last) {
-                                return jc;
-                            }
+                    _ => c,
+                };
+                // The junction model where the walks failed or saw one side only; a one-sided
+                // local answer with no board answer stays if it claims the smaller σ.
+                if let Some(j) = junction.as_ref().filter(|_| weak) {
+                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
+                        // A board answer (doubtful, but often sure of one direction: the curve
+                        // that is not extrapolated) that agrees is combined with it.
+                        if let Some(f) = board.and_then(|bc| fuse(bc, jc)) {
+                            return (f, None);
                         }
-                    }
-                    let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
-                        return curves(last);
-                    };
-                    // The gradient estimate is pulled towards a bridged junction's dark side as a
-                    // one-sided answer is: its reported σ carries half the polarity offset too. Not
-                    // in the choice below, where it would tie with the one-sided answer's: the
-                    // gradient estimate is the nearer one on the 0.2 mm dot-gain cylinder (test
-                    // `one_sided_answers_are_weighed_with_their_polarity_offset`).
-                    let offset = |mut c: DetectedCorner| {
-                        if c.path == Path::Gradient {
-                            widen(&mut c, half_offset);
-                        }
-                        c
-                    };
-                    // Where a labelled neighbour is near (squares of a few pixels, slivers beside a
-                    // silhouette), the window holds another junction's edges too: the estimate
-                    // lands between the two (1.5–3 px off at 640 × 480, claiming σ 0.3 px) and is
-                    // no evidence. Beyond the board's last labelled column the squares narrow
-                    // further towards the silhouette, so "near" reaches four window radii
-                    // (`CLEAR_GRADIENT_RADII`).
-                    let clear = nearest_labelled(&corners, b, &corners[i], (row, col))
-                        >= CLEAR_GRADIENT_RADII * g.radius as f64;
-                    let gradient = clear.then(|| gradient_corner(image, pixel, g)).flatten();
-                    curves(offset(match (gradient, board) {
-                        // Two independent estimates that agree within the gradient estimate's σ:
-                        // their mean. Where they disagree, the doubtful board-wide answer (short,
-                        // extrapolated curves) is the likelier to be wrong.
-                        (Some(gc), Some(b))
-                            if (gc.x - b.x).hypot(gc.y - b.y) <= gc.sigma.unwrap_or(0.0) =>
-                        {
-                            DetectedCorner {
-                                x: 0.5 * (gc.x + b.x),
-                                y: 0.5 * (gc.y + b.y),
-                                ..gc
-                            }
-                        }
-                        // A one-sided local answer against the gradient estimate: the one that
-                        // claims the smaller σ.
-                        (Some(gc), None)
-                            if last.status == Status::Fallback
-                                && sigma_of(&last) <= sigma_of(&gc) =>
-                        {
+                        let one_sided = last.status == Status::Fallback && board.is_none();
+                        let kept = if one_sided && sigma_of(&last) <= sigma_of(&jc) {
                             last
+                        } else {
+                            jc
+                        };
+                        return (kept, None);
+                    }
+                }
+                // On the board's boundary (a labelled neighbour missing) a converged answer whose
+                // σ is above the board's limit is doubtful too (the walks beyond the corner are
+                // short or absent, the curves extrapolated): the junction model's answer replaces
+                // it if it claims the smaller σ. Not inside the board: at an S's inflection the
+                // model (one curvature per edge) is biased by 0.02–0.03 px where the local
+                // refiner is not.
+                let boundary = || {
+                    [(0, 1), (0, -1), (1, 0), (-1, 0)]
+                        .iter()
+                        .any(|&(dr, dc)| !b.labels.contains(&(row + dr, col + dc)))
+                };
+                let doubtful = !weak && last.sigma.is_some_and(|s| s > sigma_limit) && boundary();
+                if let Some(j) = junction.as_ref().filter(|_| doubtful) {
+                    if let Some(jc) = junction_corner(image, &corners, b, i, pixel, j, true) {
+                        if let Some(f) = board.and_then(|bc| fuse(bc, jc)) {
+                            return (f, None);
                         }
-                        (gc, _) => gc.unwrap_or(last),
-                    }))
-                })();
+                        if sigma_of(&jc) < sigma_of(&last) {
+                            return (jc, None);
+                        }
+                    }
+                }
+                let Some(g) = params.gradient.as_ref().filter(|_| weak) else {
+                    return (curves(last), None);
+                };
+                // The gradient estimate is pulled towards a bridged junction's dark side as a
+                // one-sided answer is: its reported σ carries half the polarity offset too. Not
+                // in the choice below, where it would tie with the one-sided answer's: the
+                // gradient estimate is the nearer one on the 0.2 mm dot-gain cylinder (test
+                // `one_sided_answers_are_weighed_with_their_polarity_offset`).
+                let offset = |mut c: DetectedCorner| {
+                    if c.path == Path::Gradient {
+                        widen(&mut c, half_offset);
+                    }
+                    c
+                };
+                // Where a labelled neighbour is near (squares of a few pixels, slivers beside a
+                // silhouette), the window holds another junction's edges too: the estimate
+                // lands between the two (1.5–3 px off at 640 × 480, claiming σ 0.3 px) and is
+                // no evidence. Beyond the board's last labelled column the squares narrow
+                // further towards the silhouette, so "near" reaches four window radii
+                // (`CLEAR_GRADIENT_RADII`).
+                let clear = nearest_labelled(&corners, b, &corners[i], (row, col))
+                    >= CLEAR_GRADIENT_RADII * g.radius as f64;
+                let gradient = clear.then(|| gradient_corner(image, pixel, g)).flatten();
+                let placed = curves(offset(match (gradient, board) {
+                    // Two independent estimates that agree within the gradient estimate's σ:
+                    // their mean. Where they disagree, the doubtful board-wide answer (short,
+                    // extrapolated curves) is the likelier to be wrong.
+                    (Some(gc), Some(b))
+                        if (gc.x - b.x).hypot(gc.y - b.y) <= gc.sigma.unwrap_or(0.0) =>
+                    {
+                        DetectedCorner {
+                            x: 0.5 * (gc.x + b.x),
+                            y: 0.5 * (gc.y + b.y),
+                            ..gc
+                        }
+                    }
+                    // A one-sided local answer against the gradient estimate: the one that
+                    // claims the smaller σ.
+                    (Some(gc), None)
+                        if last.status == Status::Fallback && sigma_of(&last) <= sigma_of(&gc) =>
+                    {
+                        last
+                    }
+                    (gc, _) => gc.unwrap_or(last),
+                }));
                 (placed, None)
             })
             // A board-wide answer above the board's σ limit that stands for want of a better
@@ -793,8 +790,8 @@ fn sure_far(
 
 /// `c` placed by the gradient estimate started from its position, if that converges. Its σ is
 /// widened by the estimate's dependence on its window: the same estimate with a window
-/// [`WINDOW_CHECK`] times wider (up to the largest valid window) lands `d` px away (or fails within `max_shift`, then `d` is
-/// `max_shift`), and the covariance gains `d² I`. On an ideal X-junction the answer does not
+/// [`WINDOW_CHECK`] times wider (up to the largest valid window) lands `d` px away (or fails
+/// within `max_shift`, then `d` is `max_shift`), and the covariance gains `d² I`. On an ideal X-junction the answer does not
 /// depend on the window (every gradient is orthogonal to its ray through the junction); edges
 /// of other junctions within it (narrow squares beside a silhouette, slivers merged by blur)
 /// pull it by an amount that changes with the window, which the sandwich covariance of one
