@@ -44,7 +44,9 @@ pub struct DetectArgs {
     /// How corners are placed: `local` (single-corner refiner) or `board` (row and column curves
     /// fitted along the whole board, local where a line has too few samples). Corners the local
     /// refiner fails on or sees on one side only, and doubtful board answers, take the junction
-    /// model (path `junction`), failing that the gradient estimate (path `gradient`).
+    /// model (path `junction`), failing that the gradient estimate (path `gradient`). A corner
+    /// beside hairline slivers at a silhouette that none of them places, or places less surely,
+    /// keeps the completion's fit there (path `hairline`).
     #[arg(long = "refine", value_name = "MODE", default_value = "board", value_parser = ["local", "board"])]
     mode: String,
     /// Print CSV rows (image,board,row,col,x,y,score,status,path,sigma,cov_xx,cov_xy,cov_yy)

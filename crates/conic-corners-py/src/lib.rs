@@ -40,6 +40,9 @@ const PATH_BOARD: u8 = 1;
 const PATH_GRADIENT: u8 = 2;
 /// Path code of a corner placed by the blurred X-junction model fitted to its pixels.
 const PATH_JUNCTION: u8 = 3;
+/// Path code of a corner placed beside hairline slivers at a silhouette, where the board's
+/// boundary line meets the grid line into the board.
+const PATH_HAIRLINE: u8 = 4;
 
 fn path_code(p: Path) -> u8 {
     match p {
@@ -47,6 +50,7 @@ fn path_code(p: Path) -> u8 {
         Path::Board => PATH_BOARD,
         Path::Gradient => PATH_GRADIENT,
         Path::Junction => PATH_JUNCTION,
+        Path::Hairline => PATH_HAIRLINE,
     }
 }
 
@@ -451,5 +455,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PATH_BOARD", PATH_BOARD)?;
     m.add("PATH_GRADIENT", PATH_GRADIENT)?;
     m.add("PATH_JUNCTION", PATH_JUNCTION)?;
+    m.add("PATH_HAIRLINE", PATH_HAIRLINE)?;
     Ok(())
 }

@@ -153,6 +153,10 @@ pub enum Path {
     /// The blurred X-junction model fitted to the pixels ([`crate::junction`]): set by
     /// [`crate::detect`] where the edge walks are one-sided or fail.
     Junction,
+    /// Where a board's boundary line meets the grid line into the board beside hairline
+    /// slivers at a silhouette ([`crate::completion`]): set by [`crate::detect`] where no
+    /// other estimate places the corner or claims a smaller σ.
+    Hairline,
 }
 
 /// Why a corner kept its local answer.
@@ -1990,8 +1994,8 @@ mod tests {
                     ));
                 }
                 Path::Local => st.local += 1,
-                Path::Gradient | Path::Junction => {
-                    unreachable!("only detect sets the gradient and junction paths")
+                Path::Gradient | Path::Junction | Path::Hairline => {
+                    unreachable!("only detect sets the gradient, junction and hairline paths")
                 }
             }
         }

@@ -69,9 +69,10 @@
 //!    column the board already holds, the squares beyond may be hairline slivers of a pixel or
 //!    two, too narrow for any frame; the boundary line's polarity flips at such a junction
 //!    (dark inner square: light beyond; light inner square: the dark sliver beyond), and where
-//!    it does along one straight line, the junction is placed where that line meets the grid
-//!    line into the board, if a refiner started there comes back to it. After the rounds, such
-//!    a line goes on growing by one corner a round.
+//!    it does (on straight lines either side of the junction), the junction is placed where
+//!    those lines meet the grid line into the board ([`hairline`]); no refiner needs to come
+//!    back to it, as [`crate::detect`] places such a corner by that fit where they fail
+//!    (`Path::Hairline`). After the rounds, such a line goes on growing by one corner a round.
 //!    A site whose full frame leaves the image (a board cut by the image's border) is retried
 //!    with the whole frame scaled by 0.5, then 0.25, and confirmed the same way. Nearer the
 //!    border than that (on large squares a quarter frame spans 20 px and more), a corner that
@@ -119,7 +120,7 @@ use crate::connectivity::{board_from, line_diff, Board, ConnectivityParams};
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
-use crate::quadratic_form::{fit_line_tls, intersect_lines};
+use crate::quadratic_form::fit_line_tls;
 use crate::refine::{refine_one_among, RefineParams, Status};
 use crate::segmentation::median_in_place;
 use crate::GrayImage;
@@ -175,7 +176,9 @@ impl Default for CompletionParams {
 type Label = (i32, i32);
 type P = [f64; 2];
 /// A verified site: its label, the corner found there and the site's grid steps `(u, v)`.
-type Verified = (Label, Corner, (P, P));
+/// A site's verified corner: its label, the corner, the site's grid steps and, for a
+/// [`hairline`] junction, that fit's σ (px).
+type Verified = (Label, Corner, (P, P), Option<f64>);
 
 /// Grid-frame sample offsets `(a, b)` and whether each is inner (`|a| + |b| ≤ 0.24`), grouped by
 /// quadrant: `(+,+)`, `(+,−)`, `(−,+)`, `(−,−)`; 21 per quadrant.
@@ -840,8 +843,9 @@ fn elected_at(free: &[Corner], p: P, (u, v): (P, P), radius: f64) -> Option<(P, 
 /// across that line on either side of the junction.
 const HAIRLINE_ALONG: [f64; 5] = [0.12, 0.18, 0.24, 0.3, 0.36];
 /// Offsets (grid steps into the board) of [`hairline`]'s scanlines across the grid line that
-/// runs into the board from the junction.
-const HAIRLINE_INTO: [f64; 4] = [0.1, 0.17, 0.24, 0.31];
+/// runs into the board from the junction: short of 0.35 step, where a HydraMarker dot may lie
+/// (reaching 0.38 step lost three corners of `curve_6.jpg` turned by 180°).
+const HAIRLINE_INTO: [f64; 8] = [0.1, 0.13, 0.16, 0.19, 0.22, 0.25, 0.28, 0.31];
 /// How far (a share of the contrast) [`hairline`]'s scanlines across the boundary must leave an
 /// inner square's level: a sliver of a pixel, blurred, dips only about halfway from the light
 /// level to the dark. On a full edge the crossing then lies 0.67 σ of the blur inside the
@@ -850,16 +854,30 @@ const HAIRLINE_DEPARTURE: f64 = 0.25;
 /// Rounds of [`complete_boards`] after [`CompletionParams::rounds`] in which only [`hairline`]
 /// sites are checked, at most: one a round along a line of slivers.
 const HAIRLINE_ROUNDS: usize = 32;
-/// Shortest grid step (px) into the board across [`hairline`]'s boundary line: its inner
-/// squares are sampled from 0.15 step in, which must clear the boundary's blur (a couple of
-/// pixels). Where a board's columns are foreshortened to a few pixels (19 × 29 corners of 6 mm
-/// round a 60 mm cylinder, columns of 6–8 px at its silhouette), any column's lines flip there,
-/// and chains of corners 2.6–5.9 px off the truth were added.
-const HAIRLINE_MIN_STEP: f64 = 16.0;
+/// Shortest grid step (px) into the board across [`hairline`]'s boundary line: the grid line
+/// into the board is sampled from 0.1 step in, at least 3 px, clear of the boundary's blur (a
+/// couple of pixels), and the parabola through those crossings is extrapolated to the boundary.
+/// Where a board's columns are foreshortened to a few pixels (19 × 29 corners of 6 mm round a
+/// 60 mm cylinder, columns of 6–8 px at its silhouette), any column's lines flip there: at
+/// 16 px chains of corners 2.6–5.9 px off the truth were added with a straight grid line, and
+/// one 1.8 px off with the parabola (its step 19.5 px). The photos' sliver columns have steps
+/// of 45–150 px.
+const HAIRLINE_MIN_STEP: f64 = 30.0;
 /// Largest RMS distance (px) of [`hairline`]'s crossings from their line.
 const HAIRLINE_RMS: f64 = 0.5;
 /// Largest angle (degrees) between [`hairline`]'s boundary line and the grid's.
 const HAIRLINE_ANGLE_DEG: f64 = 15.0;
+
+/// A junction placed by [`hairline`] (image coordinates).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Hairline {
+    point: P,
+    /// The correlation of the inner squares' samples with their expected levels.
+    score: f64,
+    /// The fit's own uncertainty (px): half the two sides' disagreement and the largest RMS
+    /// of the crossings about their curves, in quadrature.
+    sigma: f64,
+}
 
 /// A junction beside a hairline sliver: the squares beyond a board's boundary line
 /// foreshortened at a silhouette to a pixel or two, too narrow for any frame of [`verify`]
@@ -876,14 +894,16 @@ const HAIRLINE_ANGLE_DEG: f64 = 15.0;
 /// is the bright one. The inner squares' levels (medians of 9 samples at 0.15–0.35 step in) must
 /// differ by `min_contrast`, and their samples correlate with the expected levels by `min_ncc`.
 /// The grid line into the board is found first, through the crossings between the two inner
-/// squares on scanlines along the boundary at [`HAIRLINE_INTO`] step inside. Then, from where it
-/// meets the boundary, on either side, scanlines across the boundary line at [`HAIRLINE_ALONG`]
-/// walk outwards from 0.12 step inside, by quarter pixels, to where the level departs from the
-/// inner square's by [`HAIRLINE_DEPARTURE`] of the contrast towards the other's (up to 0.12
-/// step + 2 px outside); all ten crossings must lie on one straight line (RMS ≤
-/// [`HAIRLINE_RMS`]) within [`HAIRLINE_ANGLE_DEG`] of the grid's line. The junction is where the
-/// two lines meet. Returns it and the correlation; `None` where any of this fails. Image
-/// coordinates, a pixel-level answer for the refiners of [`crate::detect`].
+/// squares on scanlines along the boundary at [`HAIRLINE_INTO`] step inside, as a parabola (it
+/// bends as the surface turns away). Then, from where it meets the boundary, on either side,
+/// scanlines across the boundary line at [`HAIRLINE_ALONG`] walk outwards from 0.12 step
+/// inside, by quarter pixels, to where the level departs from the inner square's by
+/// [`HAIRLINE_DEPARTURE`] of the contrast towards the other's (up to 0.12 step + 2 px outside);
+/// each side's five crossings must lie on a straight line (RMS ≤ [`HAIRLINE_RMS`]) within
+/// [`HAIRLINE_ANGLE_DEG`] of the grid's line. The junction is the mean of the two points where
+/// those lines meet the parabola. Returns it with the correlation and the fit's σ; `None` where
+/// any of this fails. Image coordinates; the crossings lie about 0.67 σ of the blur inside
+/// the squares, which [`crate::detect`] adds to the σ where it places the corner by it.
 fn hairline(
     image: &GrayImage,
     p: P,
@@ -892,7 +912,7 @@ fn hairline(
     bright: [bool; 2],
     min_contrast: f64,
     min_ncc: f64,
-) -> Option<(P, f64)> {
+) -> Option<Hairline> {
     if norm(inward) < HAIRLINE_MIN_STEP {
         return None;
     }
@@ -948,12 +968,16 @@ fn hairline(
     };
     // The grid line into the board, between the two inner squares, first: the boundary's
     // scanlines are placed from where it meets the boundary, as the prediction may be off by a
-    // tenth of a step along it.
+    // tenth of a step along it. Towards a silhouette that line bends as the surface turns
+    // away, so it is a parabola `s(a)`: the crossing's offset `s` along the boundary at `a`
+    // steps into the board (a straight line through the same crossings put the junction
+    // 1–1.3 px along the boundary from the refiners' answers on the photos).
     let grid = sub(along[0], along[1]);
     let across = scale(grid, 1.0 / norm(grid));
-    let mut into = [[0.0; 2]; HAIRLINE_INTO.len()];
+    let base = add(p, scale(along[1], 0.3));
+    let mut into = [(0.0, 0.0); HAIRLINE_INTO.len()];
     for (c, &a) in into.iter_mut().zip(&HAIRLINE_INTO) {
-        let from = add(add(p, scale(inward, a)), scale(along[1], 0.3));
+        let from = add(base, scale(inward, a));
         let s = crossing(
             from,
             across,
@@ -961,14 +985,24 @@ fn hairline(
             bright[1],
             0.5,
         )?;
-        *c = add(from, scale(across, s));
+        *c = (a, s);
     }
-    let row = fit_line_tls(&into, None)?;
-    let foot = sub(p, scale(row.normal(), row.signed_distance(p[0], p[1])));
+    let (row, row_rms) = fit_parabola(&into)?;
+    let on_row = |a: f64| {
+        add(
+            add(base, scale(inward, a)),
+            scale(across, row[0] + a * (row[1] + a * row[2])),
+        )
+    };
+    let foot = on_row(0.0);
     let len_in = norm(inward);
     let out = scale(inward, -1.0 / len_in);
-    let mut boundary = [[0.0; 2]; 2 * HAIRLINE_ALONG.len()];
-    for (k, side) in boundary.chunks_mut(HAIRLINE_ALONG.len()).enumerate() {
+    // Each side of the junction has its own line: at the silhouette the boundary kinks there
+    // (a light square beside a dark sliver, a dark one beside the light margin).
+    let mut ends = [[0.0; 2]; 2];
+    let mut worst_rms: f64 = row_rms;
+    for (k, end) in ends.iter_mut().enumerate() {
+        let mut side = [[0.0; 2]; HAIRLINE_ALONG.len()];
         for (c, &b) in side.iter_mut().zip(&HAIRLINE_ALONG) {
             let from = add(add(foot, scale(along[k], b)), scale(inward, 0.12));
             let s = crossing(
@@ -980,20 +1014,73 @@ fn hairline(
             )?;
             *c = add(from, scale(out, s));
         }
+        let line = fit_line_tls(&side, None)?;
+        let rms = (side
+            .iter()
+            .map(|q| line.signed_distance(q[0], q[1]).powi(2))
+            .sum::<f64>()
+            / side.len() as f64)
+            .sqrt();
+        let d = line.direction();
+        let cos = (d[0] * across[0] + d[1] * across[1]).abs();
+        if !(rms <= HAIRLINE_RMS && cos >= HAIRLINE_ANGLE_DEG.to_radians().cos()) {
+            return None;
+        }
+        worst_rms = worst_rms.max(rms);
+        // Where the parabola meets this side's line: Newton on the line's signed distance
+        // from a = 0 (the boundary), which the prediction is near.
+        let n = line.normal();
+        let dist = |a: f64| {
+            let q = on_row(a);
+            line.signed_distance(q[0], q[1])
+        };
+        let mut a = 0.0;
+        for _ in 0..8 {
+            let slope = n[0] * inward[0]
+                + n[1] * inward[1]
+                + (n[0] * across[0] + n[1] * across[1]) * (row[1] + 2.0 * a * row[2]);
+            if slope.abs() < 1e-9 {
+                return None;
+            }
+            a -= dist(a) / slope;
+        }
+        if !(a.abs() <= 0.25 && dist(a).abs() < 1e-6) {
+            return None;
+        }
+        *end = on_row(a);
     }
-    let line = fit_line_tls(&boundary, None)?;
-    let rms = (boundary
-        .iter()
-        .map(|q| line.signed_distance(q[0], q[1]).powi(2))
-        .sum::<f64>()
-        / boundary.len() as f64)
-        .sqrt();
-    let d = line.direction();
-    let cos = (d[0] * across[0] + d[1] * across[1]).abs();
-    if !(rms <= HAIRLINE_RMS && cos >= HAIRLINE_ANGLE_DEG.to_radians().cos()) {
+    let z = scale(add(ends[0], ends[1]), 0.5);
+    // The fit's own uncertainty: the two sides' disagreement and the scatter of the crossings
+    // about their curves (one crossing's, a conservative share of a fit through several).
+    let sigma = (0.25 * norm(sub(ends[0], ends[1])).powi(2) + worst_rms.powi(2)).sqrt();
+    Some(Hairline {
+        point: z,
+        score,
+        sigma,
+    })
+}
+
+/// The least-squares parabola `s = c₀ + c₁ a + c₂ a²` through `(a, s)` pairs and the RMS of its
+/// residuals; `None` with fewer than four pairs or collinear `a`.
+fn fit_parabola(points: &[(f64, f64)]) -> Option<([f64; 3], f64)> {
+    if points.len() < 4 {
         return None;
     }
-    Some((intersect_lines(&line, &row)?, score))
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = nalgebra::Vector3::<f64>::zeros();
+    for &(a, s) in points {
+        let row = nalgebra::Vector3::new(1.0, a, a * a);
+        ata += row * row.transpose();
+        atb += row * s;
+    }
+    let c = ata.cholesky()?.solve(&atb);
+    let rms = (points
+        .iter()
+        .map(|&(a, s)| (c[0] + a * (c[1] + a * c[2]) - s).powi(2))
+        .sum::<f64>()
+        / points.len() as f64)
+        .sqrt();
+    Some(([c[0], c[1], c[2]], rms))
 }
 
 /// What the junction at a site must show: the checker's phase there (±1, the sign of its
@@ -1072,19 +1159,33 @@ fn verify(
 
 /// Completes every board (rule in the [module docs](self)): verified corners are appended to
 /// `corners` and their indices and labels added to the boards, which stay canonical (minimum
-/// label 0, sorted by `(row, col)`, `rows`/`cols` updated). Returns the number of corners added.
-/// Boards whose indices are out of range of `corners` are left alone.
+/// label 0, sorted by `(row, col)`, `rows`/`cols` updated). Boards whose indices are out of
+/// range of `corners` are left alone.
 pub fn complete_boards(
     image: &GrayImage,
     corners: &mut Vec<Corner>,
     boards: &mut [Board],
     params: &CompletionParams,
-) -> usize {
-    let mut added = 0;
+) -> Completed {
+    let mut done = Completed::default();
     for b in 0..boards.len() {
-        added += complete_one(image, corners, boards, b, params);
+        complete_one(image, corners, boards, b, params, &mut done);
     }
-    added
+    done
+}
+
+/// What [`complete_boards`] added.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Completed {
+    /// Number of corners added.
+    pub added: usize,
+    /// The corners (indices into `corners`) placed beside hairline slivers at a silhouette,
+    /// where the boundary line's polarity flips (see the module docs), with the σ (px) of
+    /// that placement's fit: the crossings' scatter about their curves and the disagreement
+    /// of the boundary's two sides. Not in it: the crossings' offset into the board, about
+    /// two thirds of the blur's σ (they are taken a quarter of the contrast from the inner
+    /// square's level).
+    pub hairlines: HashMap<usize, f64>,
 }
 
 fn complete_one(
@@ -1093,9 +1194,10 @@ fn complete_one(
     boards: &mut [Board],
     b: usize,
     params: &CompletionParams,
-) -> usize {
+    done: &mut Completed,
+) {
     if boards[b].corners.iter().any(|&i| i >= corners.len()) || boards[b].labels.is_empty() {
-        return 0;
+        return;
     }
     let margin = params.rounds.min(1000) as i32 + 3;
     let mut grid = Grid::new(
@@ -1107,7 +1209,7 @@ fn complete_one(
         margin,
     );
     let Some(reference) = reference(image, &grid, &boards[b].labels) else {
-        return 0;
+        return;
     };
     let min_contrast = params.min_contrast_rel * reference.contrast;
     // Prediction count at each failed site: it is retried only with more support.
@@ -1313,7 +1415,7 @@ fn complete_one(
                         angles: [angle(u), angle(v)],
                         score,
                     };
-                    (t, corner, (u, v))
+                    (t, corner, (u, v), None)
                 };
                 let hairline_site = || -> Option<Verified> {
                     // A boundary line of the board whose squares beyond are hairline slivers:
@@ -1335,7 +1437,11 @@ fn complete_one(
                             _ => None,
                         }
                     };
-                    let (z, score) = [
+                    let Hairline {
+                        point: z,
+                        score,
+                        sigma,
+                    } = [
                         config(outer_u, frame.u, frame.v),
                         config(outer_v, frame.v, frame.u),
                     ]
@@ -1352,25 +1458,16 @@ fn complete_one(
                             params.min_ncc,
                         )
                     })?;
-                    // As at a sliver, a refiner started there must come back to it: the edge
-                    // walks, the gradient estimate (both within `SLIVER_CONFIRM_SHIFT`) or the
-                    // junction model. Looser checks let through corners that no refiner of
-                    // `detect` places (`curve_5.jpg` (2, 0), `curve_6.jpg` (9, 0)).
-                    let placed = || {
-                        confirmed(z)
-                            || params.gradient.as_ref().is_some_and(|g| {
-                                let g = GradientParams {
-                                    max_shift: SLIVER_CONFIRM_SHIFT,
-                                    ..g.clone()
-                                };
-                                refine_gradient(image, z, &g).is_some()
-                            })
-                            || junction_confirms(z)
-                    };
-                    if norm(sub(z, p)) > params.max_offset * step || !placed() {
+                    if norm(sub(z, p)) > params.max_offset * step {
                         return None;
                     }
-                    Some(found(z, score))
+                    // No refiner needs to come back to it: `detect` places such a corner where
+                    // they fail (`Path::Hairline`). Requiring one lost all but the first
+                    // two or three corners down a line of slivers, which the junction model
+                    // (one sliver, the pattern flipping beyond it) does not describe where
+                    // the light sliver merges with the margin.
+                    let (_, corner, steps, _) = found(z, score);
+                    Some((t, corner, steps, Some(sigma)))
                 };
                 let regular = || -> Option<Verified> {
                     let (q, score, narrow) = verified?;
@@ -1458,16 +1555,16 @@ fn complete_one(
         // before them this round: more than half a step away in the site's grid frame, so
         // that a sliver's corner, nearer its neighbour than half the mean step, is no
         // duplicate of it.
-        let mut accepted: Vec<(Label, Corner)> = Vec::new();
-        for (t, z, (u, v)) in checked.into_iter().flatten() {
+        let mut accepted: Vec<(Label, Corner, Option<f64>)> = Vec::new();
+        for (t, z, (u, v), hair) in checked.into_iter().flatten() {
             let clear = |x: f64, y: f64| in_steps([x - z.x, y - z.y], u, v) > 0.5;
             let free = boards
                 .iter()
                 .flat_map(|bd| bd.corners.iter())
                 .all(|&i| clear(corners[i].x, corners[i].y))
-                && accepted.iter().all(|(_, a)| clear(a.x, a.y));
+                && accepted.iter().all(|(_, a, _)| clear(a.x, a.y));
             if free {
-                accepted.push((t, z));
+                accepted.push((t, z, hair));
             }
         }
         if accepted.is_empty() {
@@ -1477,8 +1574,11 @@ fn complete_one(
             hairline_only = true;
             continue;
         }
-        for (t, c) in accepted {
+        for (t, c, hair) in accepted {
             grid.set(t, [c.x, c.y]);
+            if let Some(sigma) = hair {
+                done.hairlines.insert(corners.len(), sigma);
+            }
             boards[b].corners.push(corners.len());
             boards[b].labels.push(t);
             corners.push(c);
@@ -1488,7 +1588,7 @@ fn complete_one(
     if added > 0 {
         canonicalize(&mut boards[b]);
     }
-    added
+    done.added += added;
 }
 
 /// `(min row, max row, min col, max col)` of non-empty `labels`.
@@ -1693,7 +1793,8 @@ mod tests {
                 &mut corners,
                 &mut boards,
                 &CompletionParams::default(),
-            );
+            )
+            .added;
             assert_eq!(added, removed, "{surface:?}");
             assert_eq!(boards[0].corners.len(), full);
             assert_eq!(
@@ -1717,7 +1818,8 @@ mod tests {
             &mut corners,
             &mut boards,
             &CompletionParams::default(),
-        );
+        )
+        .added;
         assert_eq!(added, 0);
         assert_eq!(boards, before);
     }
@@ -1787,7 +1889,8 @@ mod tests {
                 &mut corners,
                 &mut boards,
                 &CompletionParams::default()
-            ),
+            )
+            .added,
             0
         );
         assert_eq!(boards, before);
@@ -1799,7 +1902,8 @@ mod tests {
                 &mut corners,
                 &mut boards,
                 &CompletionParams::default()
-            ),
+            )
+            .added,
             0
         );
         assert_eq!(corners.len(), 1);
@@ -1856,7 +1960,7 @@ mod tests {
             .collect();
         remove(&mut boards[0], |l| !sliver_labels.contains(&l));
         let before = boards[0].corners.len();
-        let added = complete_boards(&image, &mut corners, &mut boards, params);
+        let added = complete_boards(&image, &mut corners, &mut boards, params).added;
         assert_eq!(boards[0].corners.len(), before + added);
         let worst = boards[0]
             .corners
@@ -1928,7 +2032,8 @@ mod tests {
                     score: 1.0,
                 });
             }
-            let added = complete_boards(&image, &mut corners, &mut boards, &Default::default());
+            let added =
+                complete_boards(&image, &mut corners, &mut boards, &Default::default()).added;
             let on_sliver: Vec<f64> = boards[0]
                 .corners
                 .iter()
@@ -1977,7 +2082,12 @@ mod tests {
         // below the row line (side 0) is the bright one.
         let (p, inward, along) = ([41.0, 61.0], [40.0, 0.0], [[0.0, 40.0], [0.0, -40.0]]);
         let found = hairline(&board(true), p, inward, along, [true, false], 80.0, 0.7);
-        let (z, score) = found.expect("a junction beside the sliver");
+        let Hairline {
+            point: z,
+            score,
+            sigma,
+        } = found.expect("a junction beside the sliver");
+        assert!(sigma < 0.2, "{sigma}");
         // The boundary's crossings lie 0.67 σ inside the squares (a pixel-level answer).
         assert!(
             (z[0] - 40.7).abs() < 0.2 && (z[1] - 60.0).abs() < 0.2,

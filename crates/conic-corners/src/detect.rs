@@ -289,6 +289,10 @@ pub struct Detection {
 /// robustness report, so the ceiling leaves them alone.
 const TYPICAL_SIGMA_CEILING: f64 = 0.1;
 
+/// The blur σ (px) that a [`Path::Hairline`] corner's σ assumes where neither the board-wide
+/// fit nor the caller gives one: about the photos' (1–2 px).
+const HAIRLINE_BLUR_UNKNOWN: f64 = 1.5;
+
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
@@ -318,13 +322,15 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
     // Before completion, so that the corners of a piece dropped for its labels are free to be
     // completed into the board they belong to.
     split_by_phase(image, &corners, &mut labelled, params.labels.min_corners);
-    complete_boards(image, &mut corners, &mut labelled, &params.completion);
+    let mut hairlines =
+        complete_boards(image, &mut corners, &mut labelled, &params.completion).hairlines;
     // Two pieces of a board that a pen or a finger split may line up across the gap along two
     // grid lines (what a merge needs) only once each has been completed up to it.
     let pieces = labelled.len();
     labelled = merge_split_boards(&corners, labelled, |b| board_phase(image, &corners, b));
     if labelled.len() < pieces {
-        complete_boards(image, &mut corners, &mut labelled, &params.completion);
+        let again = complete_boards(image, &mut corners, &mut labelled, &params.completion);
+        hairlines.extend(again.hairlines);
     }
     let completion_ms = ms(t);
     // Board mode fits the grid lines from the pixel-level corners (the walks measure the edges
@@ -378,7 +384,7 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
         let t = Instant::now();
         // Each corner, and the difference to a contradicting estimate of it that lost (see
         // [`disputed`]).
-        let (refined, disputes): (Vec<DetectedCorner>, Vec<Option<[f64; 2]>>) = b
+        let (mut refined, disputes): (Vec<DetectedCorner>, Vec<Option<[f64; 2]>>) = b
             .corners
             .par_iter()
             .zip(&b.labels)
@@ -614,6 +620,21 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
                 (DetectedCorner { status, ..c }, dispute)
             })
             .unzip();
+        // A junction beside hairline slivers where nothing else places it, or places it less
+        // surely: the completion's crossings lie about two thirds of the blur's σ into the
+        // board (module docs of `completion`), which its σ owns up to.
+        let hair_blur = blur.unwrap_or(HAIRLINE_BLUR_UNKNOWN);
+        for (c, i) in refined.iter_mut().zip(&b.corners) {
+            let Some(&fit) = hairlines.get(i) else {
+                continue;
+            };
+            let sigma = fit.hypot(2.0 / 3.0 * (hair_blur * hair_blur + 1.0 / 12.0).sqrt());
+            if c.status == Status::Failed || sigma < sigma_of(c) {
+                let at = [corners[*i].x, corners[*i].y];
+                let cov = [[sigma * sigma, 0.0], [0.0, sigma * sigma]];
+                *c = fallback_at(*c, at, cov, Path::Hairline);
+            }
+        }
         refine_ms += ms(t);
         let mut board = Board {
             rows: b.rows,

@@ -381,9 +381,9 @@ fn real_photos_when_present() {
     let expected = [
         ("curve_4.jpg", 110),
         ("curve_5.jpg", 103),
-        ("curve_6.jpg", 107),
-        ("curve_7.jpg", 103),
-        ("curve_8.jpg", 103),
+        ("curve_6.jpg", 110),
+        ("curve_7.jpg", 110),
+        ("curve_8.jpg", 105),
         ("marker_real.jpg", 94),
         ("marker_real2.jpg", 121),
         ("marker_real3.jpg", 87),
@@ -1563,12 +1563,12 @@ fn honesty_report() {
         ),
         ("S 80", Surface::SShape { radius_mm: 80.0 }),
     ];
-    println!("| condition | surface | visible | found | off | RMS px | wrong σ (b, l, j, g) |");
+    println!("| condition | surface | visible | found | off | RMS px | wrong σ (b, l, j, g, h) |");
     println!("|---|---|---|---|---|---|---|");
     for (condition, edit) in conditions {
         for (name, surface) in surfaces {
             let (mut visible, mut found, mut off, mut sq) = (0, 0, 0, 0.0);
-            let mut wrong = [0usize; 4];
+            let mut wrong = [0usize; 5];
             for seed in 0..5u64 {
                 let mut t = template();
                 edit(&mut t);
@@ -1586,6 +1586,7 @@ fn honesty_report() {
                             Path::Local => 1,
                             Path::Junction => 2,
                             Path::Gradient => 3,
+                            Path::Hairline => 4,
                         }] += 1;
                     }
                     let d = nearest(c.x, c.y, true);
@@ -1596,10 +1597,10 @@ fn honesty_report() {
                 }
             }
             let rms = (sq / found.max(1) as f64).sqrt();
-            let [b, l, j, g] = wrong;
+            let [b, l, j, g, h] = wrong;
             println!(
-                "| {condition} | {name} | {visible} | {found} | {off} | {rms:.4} | {} ({b}, {l}, {j}, {g}) |",
-                b + l + j + g
+                "| {condition} | {name} | {visible} | {found} | {off} | {rms:.4} | {} ({b}, {l}, {j}, {g}, {h}) |",
+                b + l + j + g + h
             );
         }
     }

@@ -26,8 +26,10 @@ straight lines instead of curves), :data:`CONVERGED` (2).
 Path codes (``Board.paths``): :data:`PATH_LOCAL` (0, placed by the single-corner refiner),
 :data:`PATH_BOARD` (1, the intersection of the row and column curves fitted along the whole board,
 with a standard deviation in ``Board.sigmas`` like every placed corner), :data:`PATH_GRADIENT` (2, the
-gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort) and
-:data:`PATH_JUNCTION` (3, a blurred X-junction model fitted to the pixels around the corner);
+gradient-orthogonality estimate of OpenCV's ``cornerSubPix`` kind, the last resort),
+:data:`PATH_JUNCTION` (3, a blurred X-junction model fitted to the pixels around the corner) and
+:data:`PATH_HAIRLINE` (4, where the board's boundary line meets the grid line into the board, beside
+squares foreshortened to hairline slivers at a silhouette, where nothing else places the corner);
 :func:`detect` fits board-wide by default and falls back to the local refiner per corner where a grid
 line has too few samples, to the junction model where the local refiner fails or sees one side only
 (foreshortened squares at a silhouette), and to the gradient estimate where that fails too. A
@@ -59,6 +61,7 @@ __all__ = [
     "PATH_BOARD",
     "PATH_GRADIENT",
     "PATH_JUNCTION",
+    "PATH_HAIRLINE",
     "PATH_NAMES",
 ]
 
@@ -71,8 +74,9 @@ PATH_LOCAL: int = _native.PATH_LOCAL
 PATH_BOARD: int = _native.PATH_BOARD
 PATH_GRADIENT: int = _native.PATH_GRADIENT
 PATH_JUNCTION: int = _native.PATH_JUNCTION
+PATH_HAIRLINE: int = _native.PATH_HAIRLINE
 #: Path code → name, the names the CLI prints in its JSON.
-PATH_NAMES: Tuple[str, str, str, str] = ("local", "board", "gradient", "junction")
+PATH_NAMES: Tuple[str, str, str, str, str] = ("local", "board", "gradient", "junction", "hairline")
 
 
 @dataclass(frozen=True, eq=False)

@@ -24,8 +24,10 @@ PATH_GRADIENT: int
 """Path 2: placed by the gradient-orthogonality estimate (last resort)."""
 PATH_JUNCTION: int
 """Path 3: placed by the blurred X-junction model fitted to its pixels."""
-PATH_NAMES: Tuple[str, str, str, str]
-"""Path code -> name ("local", "board", "gradient", "junction")."""
+PATH_HAIRLINE: int
+"""Path 4: placed where the board's boundary line meets the grid line into it, beside hairline slivers at a silhouette."""
+PATH_NAMES: Tuple[str, str, str, str, str]
+"""Path code -> name ("local", "board", "gradient", "junction", "hairline")."""
 
 class Board:
     """One detected board: its labelled corners sorted by (row, col)."""
@@ -43,7 +45,7 @@ class Board:
     residuals: npt.NDArray[np.float64]
     """N RMS fit residuals in px, NaN where not refined."""
     paths: npt.NDArray[np.uint8]
-    """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT, PATH_JUNCTION)."""
+    """N path codes (PATH_LOCAL, PATH_BOARD, PATH_GRADIENT, PATH_JUNCTION, PATH_HAIRLINE)."""
     sigmas: npt.NDArray[np.float64]
     """N standard deviations (px, worst direction) of the positions, NaN where refinement failed."""
     covariances: npt.NDArray[np.float64]
