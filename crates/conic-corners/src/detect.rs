@@ -289,10 +289,6 @@ pub struct Detection {
 /// robustness report, so the ceiling leaves them alone.
 const TYPICAL_SIGMA_CEILING: f64 = 0.1;
 
-/// The blur σ (px) that a [`Path::Hairline`] corner's σ assumes where neither the board-wide
-/// fit nor the caller gives one: about the photos' (1–2 px).
-const HAIRLINE_BLUR_UNKNOWN: f64 = 1.5;
-
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
@@ -621,17 +617,13 @@ pub fn detect(image: &GrayImage, params: &DetectParams) -> Detection {
             })
             .unzip();
         // A junction beside hairline slivers where nothing else places it, or places it less
-        // surely: the completion's crossings lie about two thirds of the blur's σ into the
-        // board (module docs of `completion`), which its σ owns up to.
-        let hair_blur = blur.unwrap_or(HAIRLINE_BLUR_UNKNOWN);
+        // surely: the completion's fit, with its covariance.
         for (c, i) in refined.iter_mut().zip(&b.corners) {
-            let Some(&fit) = hairlines.get(i) else {
+            let Some(&cov) = hairlines.get(i) else {
                 continue;
             };
-            let sigma = fit.hypot(2.0 / 3.0 * (hair_blur * hair_blur + 1.0 / 12.0).sqrt());
-            if c.status == Status::Failed || sigma < sigma_of(c) {
+            if c.status == Status::Failed || worst_sigma(cov) < sigma_of(c) {
                 let at = [corners[*i].x, corners[*i].y];
-                let cov = [[sigma * sigma, 0.0], [0.0, sigma * sigma]];
                 *c = fallback_at(*c, at, cov, Path::Hairline);
             }
         }

@@ -383,7 +383,7 @@ fn real_photos_when_present() {
         ("curve_5.jpg", 103),
         ("curve_6.jpg", 110),
         ("curve_7.jpg", 110),
-        ("curve_8.jpg", 105),
+        ("curve_8.jpg", 110),
         ("marker_real.jpg", 94),
         ("marker_real2.jpg", 121),
         ("marker_real3.jpg", 87),
