@@ -70,7 +70,7 @@
 //!    two, too narrow for any frame; the boundary line's polarity flips at such a junction
 //!    (dark inner square: light beyond; light inner square: the dark sliver beyond), and where
 //!    it does (on straight lines either side of the junction), the junction is placed where
-//!    those lines meet the grid line into the board ([`hairline`]); no refiner needs to come
+//!    those lines meet the grid line into the board (`hairline`); no refiner needs to come
 //!    back to it, as [`crate::detect`] places such a corner by that fit where they fail
 //!    (`Path::Hairline`). After the rounds, such a line goes on growing by one corner a round.
 //!    A site whose full frame leaves the image (a board cut by the image's border) is retried
@@ -860,15 +860,12 @@ const HAIRLINE_DEPARTURE: f64 = 0.25;
 /// Rounds of [`complete_boards`] after [`CompletionParams::rounds`] in which only [`hairline`]
 /// sites are checked, at most: one a round along a line of slivers.
 const HAIRLINE_ROUNDS: usize = 32;
-/// Shortest grid step (px) into the board across [`hairline`]'s boundary line: the grid line
-/// into the board is sampled from 0.1 step in, at least 3 px, clear of the boundary's blur (a
-/// couple of pixels), and the parabola through those crossings is extrapolated to the boundary.
-/// Where a board's columns are foreshortened to a few pixels (19 × 29 corners of 6 mm round a
-/// 60 mm cylinder, columns of 6–8 px at its silhouette), any column's lines flip there: at
-/// 16 px chains of corners 2.6–5.9 px off the truth were added with a straight grid line, and
-/// one 1.8 px off with the parabola (its step 19.5 px). The photos' sliver columns have steps
-/// of 45–150 px.
-const HAIRLINE_MIN_STEP: f64 = 30.0;
+/// Shortest grid step (px) into the board across [`hairline`]'s boundary line: its inner
+/// squares are sampled from 0.1 step in, which must clear the boundary's blur (a couple of
+/// pixels). Where a board's columns are foreshortened to a few pixels (19 × 29 corners of 6 mm
+/// round a 60 mm cylinder, columns of 6–8 px at its silhouette), any column's lines flip there,
+/// and chains of corners 2.6–5.9 px off the truth were added.
+const HAIRLINE_MIN_STEP: f64 = 16.0;
 /// Largest RMS distance (px) of [`hairline`]'s crossings from their line.
 const HAIRLINE_RMS: f64 = 0.5;
 /// Largest angle (degrees) between [`hairline`]'s boundary line and the grid's.
@@ -898,17 +895,21 @@ struct Hairline {
 /// along the boundary line from `p` to either side, `bright` which of those sides' inner squares
 /// is the bright one. The inner squares' levels (medians of 9 samples at 0.15–0.35 step in) must
 /// differ by `min_contrast`, and their samples correlate with the expected levels by `min_ncc`.
-/// The grid line into the board is found first, through the crossings between the two inner
-/// squares on scanlines along the boundary at [`HAIRLINE_INTO`] step inside, as a parabola (it
-/// bends as the surface turns away). Then, from where it meets the boundary, on either side,
-/// scanlines across the boundary line at [`HAIRLINE_ALONG`] walk outwards from 0.12 step
-/// inside, by quarter pixels, to where the level departs from the inner square's by
-/// [`HAIRLINE_DEPARTURE`] of the contrast towards the other's (up to 0.12 step + 2 px outside);
-/// each side's five crossings must lie on a straight line (RMS ≤ [`HAIRLINE_RMS`]) within
-/// [`HAIRLINE_ANGLE_DEG`] of the grid's line. The junction is the mean of the two points where
-/// those lines meet the parabola. Returns it with the correlation and the fit's σ; `None` where
-/// any of this fails. Image coordinates; the crossings lie about 0.67 σ of the blur inside
-/// the squares, which [`crate::detect`] adds to the σ where it places the corner by it.
+/// The grid line into the board is found first, through the crossings halfway between the two
+/// inner squares' levels on scanlines along the boundary at [`HAIRLINE_INTO`] step inside (on
+/// each, the crossing nearest where the line is expected), as a straight line. From where it
+/// meets the boundary, on either side, scanlines across the boundary line at
+/// [`HAIRLINE_ALONG`] walk outwards from 0.12 step inside, by quarter pixels, to where the
+/// level departs from the inner square's by [`HAIRLINE_DEPARTURE`] of the contrast towards the
+/// other's (up to 0.12 step + 2 px outside); on the dark square's side the crossing is then
+/// taken where the level is halfway to the lightest beyond it. Each side's five crossings must
+/// lie on a straight line (RMS ≤ [`HAIRLINE_RMS`]) within [`HAIRLINE_ANGLE_DEG`] of the grid's
+/// line, and beyond the light square it must get darker than beyond the dark one by
+/// [`HAIRLINE_DEPARTURE`] of the contrast (the flip). The grid line is then fitted again as a
+/// parabola `s(a)` (it bends as the surface turns away), its crossings counted from where the
+/// straight line met the dark side's line, and the junction is where the parabola meets that
+/// line. Returns it with the correlation and its covariance; `None` where any of this fails.
+/// Image coordinates.
 fn hairline(
     image: &GrayImage,
     p: P,
@@ -974,7 +975,8 @@ fn hairline(
     // Where the level crosses halfway between the squares' from the `bright` side to the
     // other, walking from `from` along the unit `dir` for `length` px: of all such crossings
     // the one nearest `target` px from `from` (a HydraMarker dot in the square the walk
-    // starts in has a crossing of the same sense, farther from where the edge is expected).
+    // starts in has a crossing of the same sense, farther from where the edge is expected),
+    // among those before the scan leaves the image.
     let nearest_crossing = |from: P, dir: P, length: f64, bright: bool, target: f64| {
         let mid = 0.5 * (hi + lo);
         let side = |v: f64| (v > mid) == bright;
@@ -983,7 +985,10 @@ fn hairline(
         let mut best: Option<f64> = None;
         for i in 1..=steps {
             let s = 0.25 * i as f64;
-            let v = at(add(from, scale(dir, s)))?;
+            // The scan may leave the image past the edge (a board cut by the image's border).
+            let Some(v) = at(add(from, scale(dir, s))) else {
+                break;
+            };
             if side(last) && !side(v) {
                 let c = s - 0.25 * (v - mid) / (v - last);
                 if best.map_or(true, |b| (c - target).abs() < (b - target).abs()) {
@@ -1061,11 +1066,11 @@ fn hairline(
             let from = add(add(foot, scale(along[k], b)), scale(inward, 0.12));
             let s = crossing(from, out, length, bright[k], HAIRLINE_DEPARTURE)?;
             let q = add(from, scale(out, s));
-            let beyond = (0..=((length - s) / 0.25) as usize)
-                .map(|i| at(add(q, scale(out, 0.25 * i as f64))))
-                .collect::<Option<Vec<f64>>>()?;
+            // Up to the image's border, where a board cut by it ends.
             let fold = if bright[k] { f64::min } else { f64::max };
-            *e = beyond.into_iter().fold(at(q)?, fold);
+            *e = (1..=((length - s) / 0.25) as usize)
+                .map_while(|i| at(add(q, scale(out, 0.25 * i as f64))))
+                .fold(at(q)?, fold);
             // Beside the dark square the outside is a full step to the light side (module
             // docs of `hairline`): the edge is where the level is halfway to the lightest
             // beyond, not a quarter of the contrast from the square's (there the crossings
