@@ -2214,8 +2214,26 @@ mod tests {
                     score: 1.0,
                 });
             }
-            let added =
-                complete_boards(&image, &mut corners, &mut boards, &Default::default()).added;
+            let done = complete_boards(&image, &mut corners, &mut boards, &Default::default());
+            let added = done.added;
+            // Each added one is a hairline fit whose covariance owns up to its error.
+            assert_eq!(done.hairlines.len(), 3, "{sliver} px");
+            for (&i, &cov) in &done.hairlines {
+                let truth = ys
+                    .iter()
+                    .map(|&y| [xs[1], y])
+                    .min_by(|a, b| {
+                        let d = |t: &[f64; 2]| (corners[i].x - t[0]).hypot(corners[i].y - t[1]);
+                        d(a).total_cmp(&d(b))
+                    })
+                    .expect("rows");
+                let error = (corners[i].x - truth[0]).hypot(corners[i].y - truth[1]);
+                let sigma = crate::quadratic_form::worst_sigma(cov);
+                assert!(
+                    error < 3.0 * sigma,
+                    "{sliver} px: {error} px off, σ {sigma}"
+                );
+            }
             let on_sliver: Vec<f64> = boards[0]
                 .corners
                 .iter()
@@ -2228,11 +2246,10 @@ mod tests {
                     (corners[i].x - xs[1]).hypot(y)
                 })
                 .collect();
-            // The three other corners of the sliver column, each within a pixel (a pixel-level
-            // answer: the boundary crossings lie 0.67 σ inside the squares).
+            // The three other corners of the sliver column, each within half a pixel.
             assert_eq!((added, on_sliver.len()), (3, 5), "{sliver} px");
             assert!(
-                on_sliver.iter().all(|&d| d < 1.0),
+                on_sliver.iter().all(|&d| d < 0.5),
                 "{sliver} px: {on_sliver:?}"
             );
         }
