@@ -56,10 +56,10 @@ def test_both_modes_find_the_same_corners(detections):
 
 def test_local_mode_has_local_paths_and_sigmas(detections):
     # Only corners the local refiner fails on, or sees on one side only (here the column
-    # foreshortened by the cylinder), go to the junction model or the gradient estimate, and
-    # those are placed as well.
+    # foreshortened by the cylinder), go to the junction model or the gradient estimate (or, at
+    # hairline slivers, the completion's fit), and those are placed as well.
     for name, b, local, _ in detections:
-        assert set(local.path_names) <= {"local", "junction", "gradient"}, name
+        assert set(local.path_names) <= {"local", "junction", "gradient", "hairline"}, name
         other = local.paths != cc.PATH_LOCAL
         rows, cols = local.ids[:, 0], local.ids[:, 1]
         edge = (rows == 0) | (cols == 0) | (rows == local.rows - 1) | (cols == local.cols - 1)
@@ -77,7 +77,7 @@ def test_sigma_finite_positive_on_board_path(detections):
         on_board = fitted.paths == cc.PATH_BOARD
         # Doubtful board answers may take the junction model's (accuracy: next test).
         assert set(fitted.paths.tolist()) <= {
-            cc.PATH_LOCAL, cc.PATH_BOARD, cc.PATH_GRADIENT, cc.PATH_JUNCTION}
+            cc.PATH_LOCAL, cc.PATH_BOARD, cc.PATH_GRADIENT, cc.PATH_JUNCTION, cc.PATH_HAIRLINE}
         assert on_board.mean() > 0.8, f"{name}: only {on_board.sum()}/{len(fitted)} board-fitted"
         s = fitted.sigmas
         assert (np.isfinite(s[on_board]) & (s[on_board] > 0)).all(), name
