@@ -117,6 +117,7 @@
 //! covered by an occluder of the same grey as that quadrant passes (a) but usually not (b).
 
 use crate::connectivity::{board_from, line_diff, Board, ConnectivityParams};
+use crate::detect::Cov;
 use crate::election::Corner;
 use crate::gradient::{refine_gradient, GradientParams};
 use crate::junction::{refine_junction_at_boundary, JunctionParams};
@@ -175,11 +176,8 @@ impl Default for CompletionParams {
 
 type Label = (i32, i32);
 type P = [f64; 2];
-/// A 2×2 covariance (px², image axes).
-type Cov = [[f64; 2]; 2];
-/// A verified site: its label, the corner found there and the site's grid steps `(u, v)`.
-/// A site's verified corner: its label, the corner, the site's grid steps and, for a
-/// [`hairline`] junction, that fit's covariance (px²).
+/// A verified site: its label, the corner found there, the site's grid steps `(u, v)` and, for
+/// a [`hairline`] junction, that fit's covariance.
 type Verified = (Label, Corner, (P, P), Option<Cov>);
 
 /// Grid-frame sample offsets `(a, b)` and whether each is inner (`|a| + |b| ≤ 0.24`), grouped by
@@ -1031,9 +1029,10 @@ fn hairline(
             fit,
         })
     };
-    // First a straight line through the crossings, for where the boundary's scanlines go: the
-    // prediction may lie a few pixels off across the boundary, its nearest crossings then in
-    // the boundary's blur, which a straight line follows less than a parabola extrapolated.
+    // First a straight line through the parabola at the crossings' offsets, for where the
+    // boundary's scanlines go: the prediction may lie a few pixels off across the boundary, its
+    // nearest crossings then in the boundary's blur, which a straight line follows less than a
+    // parabola extrapolated.
     let first = row_from(p, 0.3)?;
     let points = HAIRLINE_INTO.map(|a| first.at(a));
     let row_line = fit_line_tls(&points, None)?;
@@ -1105,8 +1104,7 @@ fn hairline(
                 .collect();
             line_and_rms(&rest)?
         };
-        let d = line.direction();
-        let cos = (d[0] * across[0] + d[1] * across[1]).abs();
+        let cos = dot(line.direction(), across).abs();
         if !(rms <= HAIRLINE_RMS && cos >= HAIRLINE_ANGLE_DEG.to_radians().cos()) {
             return None;
         }
@@ -1125,12 +1123,6 @@ fn hairline(
     if dark_out - light_out < HAIRLINE_DEPARTURE * (hi - lo) {
         return None;
     }
-    let dark = usize::from(bright[0]);
-    let meet = |row: &RowLine| -> Option<([P; 2], f64)> {
-        let (a0, a1) = (row.meet(&lines[0])?, row.meet(&lines[1])?);
-        let dark_a = [a0, a1][dark];
-        Some(([row.at(a0), row.at(a1)], dark_a))
-    };
     // The junction is on the dark square's side's line: beyond a dark square the light
     // square's sliver or the board's light margin, an edge on the grid line either way. Beyond
     // the light square, the dark square's sliver makes an edge on the grid line too, but where
@@ -1138,7 +1130,14 @@ fn hairline(
     // margin's outer contour, a pixel or two farther out (on a concave cylinder of the
     // curved-board benchmark, the mean of the two sides put the corners 1.9–2.3 px off the
     // truth, claiming σ 0.9 px).
-    // Then the parabola through crossings counted from where that line meets the boundary.
+    let dark = usize::from(bright[0]);
+    // Where a grid line meets both sides' lines, and its `a` on the dark side's.
+    let meet = |row: &RowLine| -> Option<([P; 2], f64)> {
+        let (a0, a1) = (row.meet(&lines[0])?, row.meet(&lines[1])?);
+        Some(([row.at(a0), row.at(a1)], [a0, a1][dark]))
+    };
+    // Then the parabola through crossings counted from where the straight line meets the
+    // boundary.
     let second = row_from(intersect_lines(&row_line, &lines[dark])?, 0.15)?;
     let (ends, a) = meet(&second)?;
     let z = ends[dark];
@@ -1218,9 +1217,7 @@ impl RowLine {
         };
         let mut a = 0.0;
         for _ in 0..8 {
-            let slope = n[0] * self.inward[0]
-                + n[1] * self.inward[1]
-                + (n[0] * self.across[0] + n[1] * self.across[1]) * (c[1] + 2.0 * a * c[2]);
+            let slope = dot(n, self.inward) + dot(n, self.across) * (c[1] + 2.0 * a * c[2]);
             if slope.abs() < 1e-9 {
                 return None;
             }
@@ -1367,7 +1364,7 @@ pub struct Completed {
     /// (px², image axes) of that placement: its two lines' uncertainties (their scatter, the
     /// parabola's extrapolation, a third of the blur for the boundary's edge) carried to their
     /// intersection, and the disagreement of the boundary's two sides.
-    pub hairlines: HashMap<usize, [[f64; 2]; 2]>,
+    pub hairlines: HashMap<usize, Cov>,
 }
 
 fn complete_one(
